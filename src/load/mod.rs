@@ -1,0 +1,128 @@
+//! Loading: glTF 2.0 and OBJ files into one world-space triangle soup.
+//!
+//! Loaders only decode; they do not weld, drop degenerates or check for
+//! NaN/Inf (the build step does that, and lint reports it). They do reject
+//! structurally broken files (missing buffers, indices out of range, cycles in
+//! the node graph, unknown versions) with an [`Error::Input`] naming the file.
+
+pub mod gltf;
+pub mod obj;
+
+use crate::error::{Error, Result};
+use sha2::{Digest, Sha256};
+use std::path::Path;
+
+/// A named range of triangles in a [`Soup`] (one glTF primitive instance or one
+/// OBJ object/group), so later stages can say where a finding comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Part {
+    /// Human-readable origin, e.g. `node "Wheel.L" > mesh "Tire" > primitive 0`
+    /// or `object "Cube"` (OBJ).
+    pub name: String,
+    /// First triangle of this part in [`Soup::indices`] (triangle index, not index-buffer offset).
+    pub first_triangle: u32,
+    /// Number of triangles in this part.
+    pub triangle_count: u32,
+}
+
+/// Counters the loader reports besides the triangles.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LoadStats {
+    /// Triangle primitives (glTF) or objects/groups (OBJ) read.
+    pub primitives: u64,
+    /// Primitives/elements skipped because they are points.
+    pub skipped_points: u64,
+    /// Primitives/elements skipped because they are lines.
+    pub skipped_lines: u64,
+    /// Non-fatal remarks worth showing the user (one line each).
+    pub warnings: Vec<String>,
+}
+
+/// World-space triangle soup as loaded: `indices` holds 3 entries per
+/// triangle, each an index into `positions`. Positions are f32, already
+/// transformed by node world matrices (glTF) and possibly containing NaN/Inf.
+#[derive(Debug, Clone, Default)]
+pub struct Soup {
+    /// Vertex positions (world space).
+    pub positions: Vec<[f32; 3]>,
+    /// Triangle corner indices into `positions`, 3 per triangle, in the input's winding.
+    pub indices: Vec<u32>,
+    /// Named triangle ranges, in order, covering all triangles.
+    pub parts: Vec<Part>,
+    /// Loader counters.
+    pub stats: LoadStats,
+    /// Total bytes read from disk (main file plus external buffers).
+    pub input_bytes: u64,
+    /// SHA-256 over every byte read, in read order (main file first).
+    pub input_sha256: [u8; 32],
+}
+
+impl Soup {
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// Hashes and counts every byte a loader reads, so the output header can
+/// record exactly which input it came from.
+#[derive(Default)]
+pub struct InputDigest {
+    hasher: Sha256,
+    bytes: u64,
+}
+
+impl InputDigest {
+    /// Feed bytes that were read from an input file.
+    pub fn update(&mut self, data: &[u8]) {
+        self.hasher.update(data);
+        self.bytes += data.len() as u64;
+    }
+
+    /// Bytes fed so far and the SHA-256 digest.
+    pub fn finish(self) -> (u64, [u8; 32]) {
+        (self.bytes, self.hasher.finalize().into())
+    }
+}
+
+/// Input formats svpack reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// glTF 2.0, JSON (`.gltf`) or binary (`.glb`).
+    Gltf,
+    /// Wavefront OBJ.
+    Obj,
+}
+
+/// Detects the format from the file's first bytes, falling back to the extension.
+pub fn detect_format(path: &Path, head: &[u8]) -> Result<Format> {
+    if head.starts_with(b"glTF") {
+        return Ok(Format::Gltf);
+    }
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("gltf") | Some("glb") => Ok(Format::Gltf),
+        Some("obj") => Ok(Format::Obj),
+        _ => Err(Error::input(
+            path,
+            "unknown input format (expected .gltf, .glb or .obj)",
+        )),
+    }
+}
+
+/// Reads the whole file at `path`, mapping errors to [`Error::Io`].
+pub fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| Error::io(path, e))
+}
+
+/// Loads a glTF or OBJ file into a world-space soup.
+pub fn load(path: &Path) -> Result<Soup> {
+    let data = read_file(path)?;
+    match detect_format(path, &data)? {
+        Format::Gltf => gltf::load_gltf(path, data),
+        Format::Obj => obj::load_obj(path, data),
+    }
+}
