@@ -1,0 +1,249 @@
+//! The build pipeline: load → check → weld → topology → layout → write.
+
+use crate::error::{Error, Result};
+use crate::format::{self, BuildOptions, HistogramEntry, Header, InputInfo, MeshHeader, MeshPayload, MeshStats, BucketHeader, Section};
+use crate::layout::{self, Layout, MAX_MAX_MULT};
+use crate::load::{self, Soup};
+use crate::topology::{self, Edges};
+use crate::weld::{self, Welded};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Options of one build.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BuildConfig {
+    /// K: largest opposite-vertex count per side instance (1..=13).
+    pub max_mult: u32,
+    /// Wrap the output in a zstd frame.
+    pub compress: bool,
+}
+
+impl Default for BuildConfig {
+    fn default() -> Self {
+        BuildConfig {
+            max_mult: layout::DEFAULT_MAX_MULT,
+            compress: false,
+        }
+    }
+}
+
+/// Everything the pipeline computed for one mesh, before writing.
+#[derive(Debug, Clone)]
+pub struct Built {
+    /// Welded triangles and positions.
+    pub welded: Welded,
+    /// Edge structure.
+    pub edges: Edges,
+    /// Sides and caps buffers.
+    pub layout: Layout,
+    /// Statistics for the header.
+    pub stats: MeshStats,
+    /// Loader warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Result of [`build_file`].
+#[derive(Debug, Clone)]
+pub struct BuildOutput {
+    /// The header as written.
+    pub header: Header,
+    /// Bytes on disk.
+    pub file_bytes: u64,
+    /// Wall time of the whole build.
+    pub elapsed: Duration,
+    /// Loader warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Rejects non-finite positions used by any triangle and out-of-range
+/// indices, naming the part they come from.
+pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
+    let n = soup.positions.len();
+    for (t, c) in soup.indices.chunks_exact(3).enumerate() {
+        for &i in c {
+            let where_ = || {
+                soup.parts
+                    .iter()
+                    .find(|p| (t as u32) >= p.first_triangle && (t as u32) < p.first_triangle + p.triangle_count)
+                    .map(|p| format!(" in {}", p.name))
+                    .unwrap_or_default()
+            };
+            if i as usize >= n {
+                return Err(Error::input(
+                    path,
+                    format!("triangle {t}{}: vertex index {i} out of range ({n} vertices)", where_()),
+                ));
+            }
+            let p = soup.positions[i as usize];
+            if !p.iter().all(|v| v.is_finite()) {
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "triangle {t}{}: vertex {i} has a non-finite position ({}, {}, {})",
+                        where_(),
+                        p[0],
+                        p[1],
+                        p[2]
+                    ),
+                ));
+            }
+        }
+    }
+    if soup.indices.len() % 3 != 0 {
+        return Err(Error::input(path, "index count is not a multiple of 3"));
+    }
+    Ok(())
+}
+
+/// Runs weld, topology and layout on a checked soup.
+pub fn build_soup(soup: &Soup, max_mult: u32) -> Built {
+    let welded = weld::weld(&soup.positions, &soup.indices);
+    let edges = topology::build_edges(&welded.triangles, welded.positions.len());
+    let es = topology::edge_stats(&edges);
+    let layout = layout::layout(&welded, &edges, max_mult);
+    let stats = MeshStats {
+        primitives: soup.stats.primitives,
+        input_triangles: soup.triangle_count() as u64,
+        input_vertices: soup.positions.len() as u64,
+        welded_vertices: welded.positions.len() as u64,
+        degenerate_triangles: welded.degenerate,
+        skipped_points: soup.stats.skipped_points,
+        skipped_lines: soup.stats.skipped_lines,
+        triangles: welded.triangle_count() as u64,
+        edges: es.edges,
+        edge_instances: layout.edge_instances(),
+        open_edges: es.open_edges,
+        non_manifold_edges: es.non_manifold_edges,
+        max_fan: es.max_fan,
+        histogram: es
+            .histogram
+            .iter()
+            .map(|&(opposites, edges)| HistogramEntry { opposites, edges })
+            .collect(),
+    };
+    Built {
+        welded,
+        edges,
+        layout,
+        stats,
+        warnings: soup.stats.warnings.clone(),
+    }
+}
+
+/// Axis-aligned bounds of `positions` (zeros when empty).
+pub fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    if positions.is_empty() {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Builds `input` into the file `output`.
+pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<BuildOutput> {
+    if cfg.max_mult == 0 || cfg.max_mult > MAX_MAX_MULT {
+        return Err(Error::Other(format!(
+            "--max-mult must be between 1 and {MAX_MAX_MULT} (got {})",
+            cfg.max_mult
+        )));
+    }
+    let start = Instant::now();
+    let data = load::read_file(input)?;
+    let fmt = load::detect_format(input, &data)?;
+    let soup = match fmt {
+        load::Format::Gltf => load::gltf::load_gltf(input, data)?,
+        load::Format::Obj => load::obj::load_obj(input, data)?,
+    };
+    check_soup(input, &soup)?;
+    let built = build_soup(&soup, cfg.max_mult);
+    if built.stats.triangles == 0 {
+        return Err(Error::input(
+            input,
+            format!(
+                "no triangles to build ({} input triangles, {} degenerate, {} point and {} line primitives skipped)",
+                built.stats.input_triangles,
+                built.stats.degenerate_triangles,
+                built.stats.skipped_points,
+                built.stats.skipped_lines
+            ),
+        ));
+    }
+    let (bmin, bmax) = bounds(&built.welded.positions);
+    let name = input
+        .file_stem()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mesh = MeshPayload {
+        header: MeshHeader {
+            name,
+            bounds_min: bmin,
+            bounds_max: bmax,
+            stats: built.stats.clone(),
+            caps: Section {
+                offset: 0,
+                length: 0,
+                count: 0,
+            },
+            buckets: built
+                .layout
+                .buckets
+                .iter()
+                .map(|b| BucketHeader {
+                    k: b.k,
+                    instances: b.instances,
+                    offset: 0,
+                    length: 0,
+                })
+                .collect(),
+        },
+        caps: &built.layout.caps,
+        buckets: built.layout.buckets.iter().map(|b| b.data.as_slice()).collect(),
+    };
+    let header = Header {
+        payload_offset: 0,
+        payload_len: 0,
+        payload_crc32: 0,
+        generator: generator(),
+        input: InputInfo {
+            file_name: file_name(input),
+            format: match fmt {
+                load::Format::Gltf => "gltf".into(),
+                load::Format::Obj => "obj".into(),
+            },
+            bytes: soup.input_bytes,
+            sha256: soup.input_sha256,
+        },
+        options: BuildOptions {
+            max_mult: cfg.max_mult,
+            compress: cfg.compress,
+        },
+        bounds_min: bmin,
+        bounds_max: bmax,
+        meshes: Vec::new(),
+    };
+    let (header, file_bytes) = format::write_file(output, header, &[mesh], cfg.compress)?;
+    Ok(BuildOutput {
+        header,
+        file_bytes,
+        elapsed: start.elapsed(),
+        warnings: built.warnings,
+    })
+}
+
+/// The generator string written into headers: "svpack" and the crate version.
+pub fn generator() -> String {
+    format!("svpack {}", env!("CARGO_PKG_VERSION"))
+}

@@ -1,0 +1,489 @@
+//! The `.svpk` container: read and write (format-spec/README.md is normative).
+//!
+//! ```text
+//! 0   8  magic  "SVPK\r\n\x1a\n"
+//! 8   2  u16    version major (1)
+//! 10  2  u16    version minor (0)
+//! 12  4  u32    header length H
+//! 16  4  u32    CRC-32 of the header bytes
+//! 20  4  u32    flags (0)
+//! 24  H         header: bincode 2 legacy config (fixed-width little-endian integers)
+//! ..            zero padding to a multiple of 16 = payload_offset
+//! ..            payload: sections, each 16-byte aligned, absolute offsets
+//! ```
+//!
+//! A whole file may be wrapped in one standard zstd frame (`--compress`);
+//! readers recognise the zstd magic and unwrap it first.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// File magic: "SVPK" then the PNG-style line-ending/EOF guard.
+pub const MAGIC: [u8; 8] = *b"SVPK\r\n\x1a\n";
+/// Major version: readers reject any other major.
+pub const VERSION_MAJOR: u16 = 1;
+/// Minor version: readers accept any minor of their major (fields are only
+/// ever appended to the header, and the header length lets old readers skip them).
+pub const VERSION_MINOR: u16 = 0;
+/// Bytes before the header.
+pub const PREAMBLE_LEN: usize = 24;
+/// Payload and section alignment.
+pub const ALIGN: u64 = 16;
+/// Largest header a reader accepts (also the bincode decode allocation limit).
+pub const HEADER_LIMIT: usize = 16 << 20;
+/// Largest decompressed file a reader accepts from a zstd-wrapped file.
+pub const DECOMPRESSED_LIMIT: u64 = 16 << 30;
+/// zstd frame magic (little-endian 0xFD2FB528).
+pub const ZSTD_MAGIC: [u8; 4] = [0x28, 0xB5, 0x2F, 0xFD];
+/// zstd level used by `--compress`: fixed so output is reproducible.
+pub const ZSTD_LEVEL: i32 = 9;
+
+/// File header.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Absolute offset of the payload (multiple of 16).
+    pub payload_offset: u64,
+    /// Payload length in bytes; the file ends exactly at `payload_offset + payload_len`.
+    pub payload_len: u64,
+    /// CRC-32 (IEEE, as zlib/PNG) of the payload bytes.
+    pub payload_crc32: u32,
+    /// Tool that wrote the file, e.g. "svpack 0.1.0".
+    pub generator: String,
+    /// Where the geometry came from.
+    pub input: InputInfo,
+    /// Options the file was built with.
+    pub options: BuildOptions,
+    /// Bounds of all meshes (zeros when empty).
+    pub bounds_min: [f32; 3],
+    /// Upper bounds.
+    pub bounds_max: [f32; 3],
+    /// Meshes in drawing order.
+    pub meshes: Vec<MeshHeader>,
+}
+
+/// Input description.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputInfo {
+    /// File name without directories.
+    pub file_name: String,
+    /// "gltf" or "obj".
+    pub format: String,
+    /// Bytes read (main file and external buffers).
+    pub bytes: u64,
+    /// SHA-256 of those bytes in read order.
+    pub sha256: [u8; 32],
+}
+
+/// Build options recorded in the file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BuildOptions {
+    /// K: largest opposite-vertex count per side instance.
+    pub max_mult: u32,
+    /// Whether the file was written zstd-wrapped.
+    pub compress: bool,
+}
+
+/// A mesh: one welded triangle set with its caps and side buckets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshHeader {
+    /// Mesh name (the input file stem for whole-file builds).
+    pub name: String,
+    /// Lower bounds of the mesh's positions.
+    pub bounds_min: [f32; 3],
+    /// Upper bounds.
+    pub bounds_max: [f32; 3],
+    /// Build statistics.
+    pub stats: MeshStats,
+    /// Caps section: `count` triangles, 48 bytes each.
+    pub caps: Section,
+    /// Side buckets, increasing k, only non-empty ones.
+    pub buckets: Vec<BucketHeader>,
+}
+
+/// A payload section.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Section {
+    /// Absolute byte offset (multiple of 16).
+    pub offset: u64,
+    /// Length in bytes.
+    pub length: u64,
+    /// Number of records.
+    pub count: u64,
+}
+
+/// One side bucket: `instances` records of `(2 + k)` vec4.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BucketHeader {
+    /// Opposite vertices per instance.
+    pub k: u32,
+    /// Number of instances.
+    pub instances: u64,
+    /// Absolute byte offset (multiple of 16).
+    pub offset: u64,
+    /// `16 · (2 + k) · instances`.
+    pub length: u64,
+}
+
+/// Statistics of one mesh, as printed by `build` and `inspect`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeshStats {
+    /// Triangle primitives / OBJ groups read.
+    pub primitives: u64,
+    /// Triangles in the input (after triangulation, before welding).
+    pub input_triangles: u64,
+    /// Vertices in the input (position count).
+    pub input_vertices: u64,
+    /// Distinct positions used by kept triangles.
+    pub welded_vertices: u64,
+    /// Triangles dropped because two corners welded together.
+    pub degenerate_triangles: u64,
+    /// Point primitives/elements skipped.
+    pub skipped_points: u64,
+    /// Line primitives/elements skipped.
+    pub skipped_lines: u64,
+    /// Kept triangles (caps records).
+    pub triangles: u64,
+    /// Undirected edges.
+    pub edges: u64,
+    /// Side instances after splitting.
+    pub edge_instances: u64,
+    /// Edges with one opposite vertex.
+    pub open_edges: u64,
+    /// Edges with more than two opposite vertices.
+    pub non_manifold_edges: u64,
+    /// Largest opposite-vertex count.
+    pub max_fan: u32,
+    /// Edges by opposite-vertex count.
+    pub histogram: Vec<HistogramEntry>,
+}
+
+/// One histogram bar.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HistogramEntry {
+    /// Opposite-vertex count.
+    pub opposites: u32,
+    /// Number of edges with that count.
+    pub edges: u64,
+}
+
+fn bincode_config() -> impl bincode::config::Config {
+    bincode::config::legacy().with_limit::<HEADER_LIMIT>()
+}
+
+/// Rounds `v` up to a multiple of [`ALIGN`].
+pub fn align_up(v: u64) -> u64 {
+    v.div_ceil(ALIGN) * ALIGN
+}
+
+/// Data for one mesh to be written: the header parts and the float sections.
+pub struct MeshPayload<'a> {
+    /// Mesh header; section offsets and lengths are filled in by [`encode_to`].
+    pub header: MeshHeader,
+    /// Caps floats.
+    pub caps: &'a [f32],
+    /// Side bucket floats, in the order of `header.buckets`.
+    pub buckets: Vec<&'a [f32]>,
+}
+
+/// Writes `floats` as little-endian bytes to `out`, through a small buffer.
+fn write_f32_le<W: Write>(out: &mut W, floats: &[f32]) -> std::io::Result<()> {
+    let mut buf = [0u8; 1 << 16];
+    for chunk in floats.chunks(buf.len() / 4) {
+        for (i, v) in chunk.iter().enumerate() {
+            buf[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        out.write_all(&buf[..chunk.len() * 4])?;
+    }
+    Ok(())
+}
+
+/// CRC-32 of `floats` as little-endian bytes.
+fn crc_f32_le(hasher: &mut crc32fast::Hasher, floats: &[f32]) {
+    struct H<'a>(&'a mut crc32fast::Hasher);
+    impl Write for H<'_> {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            self.0.update(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    write_f32_le(&mut H(hasher), floats).expect("hashing cannot fail");
+}
+
+/// Fills section offsets, lengths and the payload checksum into a header.
+/// Returns the encoded header bytes and the final header.
+pub fn finalize_header(mut header: Header, meshes: &[MeshPayload<'_>]) -> Result<(Vec<u8>, Header)> {
+    header.meshes = meshes.iter().map(|m| m.header.clone()).collect();
+    let encode = |h: &Header| {
+        bincode::serde::encode_to_vec(h, bincode_config())
+            .map_err(|e| Error::Other(format!("cannot encode header: {e}")))
+    };
+    // Fixed-width integers: the header length does not depend on the offset
+    // values, so one encoding with zeros tells where the payload starts.
+    let probe_len = encode(&header)?.len();
+    let payload_offset = align_up((PREAMBLE_LEN + probe_len) as u64);
+    let mut offset = payload_offset;
+    let mut crc = crc32fast::Hasher::new();
+    for (mh, m) in header.meshes.iter_mut().zip(meshes) {
+        mh.caps = Section {
+            offset,
+            length: m.caps.len() as u64 * 4,
+            count: m.caps.len() as u64 / 12,
+        };
+        offset += mh.caps.length;
+        crc_f32_le(&mut crc, m.caps);
+        for (bh, data) in mh.buckets.iter_mut().zip(&m.buckets) {
+            bh.offset = offset;
+            bh.length = data.len() as u64 * 4;
+            offset += bh.length;
+            crc_f32_le(&mut crc, data);
+        }
+    }
+    header.payload_offset = payload_offset;
+    header.payload_len = offset - payload_offset;
+    header.payload_crc32 = crc.finalize();
+    let bytes = encode(&header)?;
+    debug_assert_eq!(bytes.len(), probe_len);
+    Ok((bytes, header))
+}
+
+/// Encodes the whole file to `out` (uncompressed container bytes).
+pub fn encode_to<W: Write>(out: &mut W, header: Header, meshes: &[MeshPayload<'_>]) -> Result<Header> {
+    let (hbytes, header) = finalize_header(header, meshes)?;
+    let io = |e: std::io::Error| Error::Other(format!("write failed: {e}"));
+    let mut pre = [0u8; PREAMBLE_LEN];
+    pre[0..8].copy_from_slice(&MAGIC);
+    pre[8..10].copy_from_slice(&VERSION_MAJOR.to_le_bytes());
+    pre[10..12].copy_from_slice(&VERSION_MINOR.to_le_bytes());
+    pre[12..16].copy_from_slice(&(hbytes.len() as u32).to_le_bytes());
+    pre[16..20].copy_from_slice(&crc32fast::hash(&hbytes).to_le_bytes());
+    out.write_all(&pre).map_err(io)?;
+    out.write_all(&hbytes).map_err(io)?;
+    let pad = header.payload_offset as usize - PREAMBLE_LEN - hbytes.len();
+    out.write_all(&[0u8; 16][..pad]).map_err(io)?;
+    for m in meshes {
+        write_f32_le(out, m.caps).map_err(io)?;
+        for b in &m.buckets {
+            write_f32_le(out, b).map_err(io)?;
+        }
+    }
+    Ok(header)
+}
+
+/// Total size of the uncompressed container for `header` (after [`finalize_header`]).
+pub fn container_len(header: &Header) -> u64 {
+    header.payload_offset + header.payload_len
+}
+
+/// Writes the file to `path` atomically (temp file in the same directory,
+/// then rename), optionally zstd-wrapped. Returns the final header and the
+/// number of bytes on disk.
+pub fn write_file(path: &Path, header: Header, meshes: &[MeshPayload<'_>], compress: bool) -> Result<(Header, u64)> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".svpack-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|e| Error::io(path, e))?;
+    let file = tmp.as_file().try_clone().map_err(|e| Error::io(path, e))?;
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+    let header = if compress {
+        let (_, probe) = finalize_header(header.clone(), meshes)?;
+        let mut enc = zstd::stream::Encoder::new(&mut w, ZSTD_LEVEL).map_err(|e| Error::io(path, e))?;
+        enc.include_contentsize(true).map_err(|e| Error::io(path, e))?;
+        enc.set_pledged_src_size(Some(container_len(&probe)))
+            .map_err(|e| Error::io(path, e))?;
+        let h = encode_to(&mut enc, header, meshes).map_err(|e| with_path(e, path))?;
+        enc.finish().map_err(|e| Error::io(path, e))?;
+        h
+    } else {
+        encode_to(&mut w, header, meshes).map_err(|e| with_path(e, path))?
+    };
+    w.flush().map_err(|e| Error::io(path, e))?;
+    drop(w);
+    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    let size = tmp.as_file().metadata().map_err(|e| Error::io(path, e))?.len();
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok((header, size))
+}
+
+fn with_path(e: Error, path: &Path) -> Error {
+    match e {
+        Error::Other(msg) => Error::input(path, msg),
+        e => e,
+    }
+}
+
+/// A file read back into memory.
+#[derive(Debug, Clone)]
+pub struct SvpkFile {
+    /// The decoded header.
+    pub header: Header,
+    /// Version minor found in the file.
+    pub version_minor: u16,
+    /// The uncompressed container bytes.
+    pub bytes: Vec<u8>,
+    /// Whether the file on disk was zstd-wrapped.
+    pub compressed: bool,
+    /// Size of the file on disk.
+    pub file_bytes: u64,
+}
+
+impl SvpkFile {
+    /// Little-endian floats of a section (copied; the byte buffer is not f32-aligned in Rust).
+    pub fn floats(&self, offset: u64, length: u64) -> Vec<f32> {
+        self.bytes[offset as usize..(offset + length) as usize]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()
+    }
+}
+
+/// Reads and fully validates a file from disk.
+pub fn read_file(path: &Path) -> Result<SvpkFile> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode(path, data)
+}
+
+/// Validates and decodes file bytes (`path` is only used in messages).
+pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
+    let err = |msg: String| Error::input(path, msg);
+    let file_bytes = data.len() as u64;
+    let (bytes, compressed) = if data.starts_with(&ZSTD_MAGIC) {
+        (decompress(path, &data)?, true)
+    } else {
+        (data, false)
+    };
+    if bytes.len() < PREAMBLE_LEN {
+        return Err(err(format!(
+            "truncated file: {} bytes, shorter than the {PREAMBLE_LEN}-byte preamble",
+            bytes.len()
+        )));
+    }
+    if bytes[0..8] != MAGIC {
+        return Err(err("not an svpack file (bad magic)".into()));
+    }
+    let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
+    let u32_at = |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
+    let (major, minor) = (u16_at(8), u16_at(10));
+    if major != VERSION_MAJOR {
+        return Err(err(format!(
+            "unsupported format version {major}.{minor} (this svpack reads {VERSION_MAJOR}.x)"
+        )));
+    }
+    let header_len = u32_at(12) as usize;
+    if header_len > HEADER_LIMIT {
+        return Err(err(format!("header length {header_len} exceeds the {HEADER_LIMIT}-byte limit")));
+    }
+    if PREAMBLE_LEN + header_len > bytes.len() {
+        return Err(err(format!(
+            "truncated file: header needs {} bytes, file has {}",
+            PREAMBLE_LEN + header_len,
+            bytes.len()
+        )));
+    }
+    let hbytes = &bytes[PREAMBLE_LEN..PREAMBLE_LEN + header_len];
+    if crc32fast::hash(hbytes) != u32_at(16) {
+        return Err(err("header checksum mismatch (file corrupted)".into()));
+    }
+    let (header, used): (Header, usize) = bincode::serde::decode_from_slice(hbytes, bincode_config())
+        .map_err(|e| err(format!("cannot decode header: {e}")))?;
+    // Same major, newer minor: trailing header fields we do not know are fine.
+    if used != header_len && minor <= VERSION_MINOR {
+        return Err(err(format!("header has {} trailing bytes", header_len - used)));
+    }
+    validate_layout(&header, header_len, bytes.len() as u64).map_err(err)?;
+    let payload = &bytes[header.payload_offset as usize..];
+    if crc32fast::hash(payload) != header.payload_crc32 {
+        return Err(err("payload checksum mismatch (file corrupted)".into()));
+    }
+    Ok(SvpkFile {
+        header,
+        version_minor: minor,
+        bytes,
+        compressed,
+        file_bytes,
+    })
+}
+
+fn decompress(path: &Path, data: &[u8]) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let dec = zstd::stream::Decoder::new(data).map_err(|e| Error::input(path, format!("zstd: {e}")))?;
+    let mut out = Vec::new();
+    dec.take(DECOMPRESSED_LIMIT + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| Error::input(path, format!("corrupt zstd stream: {e}")))?;
+    if out.len() as u64 > DECOMPRESSED_LIMIT {
+        return Err(Error::input(
+            path,
+            format!("decompressed size exceeds the {DECOMPRESSED_LIMIT}-byte limit"),
+        ));
+    }
+    Ok(out)
+}
+
+/// Checks that sections tile the payload exactly, in order, with the sizes their
+/// counts imply.
+fn validate_layout(h: &Header, header_len: usize, file_len: u64) -> std::result::Result<(), String> {
+    let expect_payload = align_up((PREAMBLE_LEN + header_len) as u64);
+    if h.payload_offset != expect_payload {
+        return Err(format!(
+            "payload offset {} should be {expect_payload}",
+            h.payload_offset
+        ));
+    }
+    let end = h.payload_offset.checked_add(h.payload_len).ok_or("payload length overflows")?;
+    if end != file_len {
+        return Err(if end > file_len {
+            format!("truncated file: payload ends at byte {end}, file has {file_len}")
+        } else {
+            format!("{} unexpected bytes after the payload", file_len - end)
+        });
+    }
+    if h.options.max_mult == 0 || h.options.max_mult > crate::layout::MAX_MAX_MULT {
+        return Err(format!("max_mult {} out of range", h.options.max_mult));
+    }
+    let mut at = h.payload_offset;
+    for (mi, m) in h.meshes.iter().enumerate() {
+        let caps_len = m.caps.count.checked_mul(48).ok_or("caps count overflows")?;
+        if m.caps.offset != at || m.caps.length != caps_len {
+            return Err(format!(
+                "mesh {mi}: caps section at {}+{} should be at {at}+{caps_len}",
+                m.caps.offset, m.caps.length
+            ));
+        }
+        at = at.checked_add(caps_len).ok_or("section offsets overflow")?;
+        let mut last_k = 0;
+        for b in &m.buckets {
+            if b.k <= last_k || b.k > h.options.max_mult || b.instances == 0 {
+                return Err(format!(
+                    "mesh {mi}: bucket k={} with {} instances is invalid (k must increase, be <= max_mult {}, and be non-empty)",
+                    b.k, b.instances, h.options.max_mult
+                ));
+            }
+            last_k = b.k;
+            let len = b
+                .instances
+                .checked_mul(16 * (2 + b.k as u64))
+                .ok_or("bucket size overflows")?;
+            if b.offset != at || b.length != len {
+                return Err(format!(
+                    "mesh {mi}: bucket k={} at {}+{} should be at {at}+{len}",
+                    b.k, b.offset, b.length
+                ));
+            }
+            at = at.checked_add(len).ok_or("section offsets overflow")?;
+        }
+    }
+    if at != end {
+        return Err(format!("sections end at {at} but payload ends at {end}"));
+    }
+    Ok(())
+}

@@ -1,0 +1,172 @@
+//! Layout: the WebGL 1 instancing buffers of the paper (Milet et al. 2015,
+//! §2.6), bucketed by opposite-vertex count instead of padded to one maxMult.
+//!
+//! Sides, bucket k: one instance per edge (chunk), `2 + k` vec4 of f32:
+//! `A.xyz, A.w = k` (opposite vertices used in this instance), `B.xyz,
+//! B.w = n` (the edge's total opposite-vertex count before splitting),
+//! `O_j.xyz, O_j.w = 1`. Every instance of bucket k uses all k slots, so there
+//! is no padding anywhere.
+//!
+//! Caps: one instance per triangle, 3 vec4 `(P0, 1), (P1, 1), (P2, 1)` in
+//! input winding.
+//!
+//! Splitting: an edge with n > K opposite vertices becomes ⌊n/K⌋ instances in
+//! bucket K and, if n mod K > 0, one more in bucket n mod K, all with the same
+//! A and B. Stencil counting is additive, so drawing the chunks separately
+//! adds up to the edge's multiplicity.
+
+use crate::topology::Edges;
+use crate::weld::Welded;
+
+/// Largest `--max-mult` accepted: the sides shader needs 3 + K vertex
+/// attributes and 16 is the most any WebGL 1 implementation we know exposes.
+pub const MAX_MAX_MULT: u32 = 13;
+
+/// Default `--max-mult`: 3 + 5 = 8 attributes, the minimum WebGL 1 guarantees
+/// (`MAX_VERTEX_ATTRIBS >= 8`), so every file built with defaults draws on
+/// every WebGL 1 device. See format-spec/README.md, "Choice of K".
+pub const DEFAULT_MAX_MULT: u32 = 5;
+
+/// One bucket of side instances.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SideBucket {
+    /// Opposite vertices per instance.
+    pub k: u32,
+    /// Number of instances.
+    pub instances: u64,
+    /// `instances · (2 + k) · 4` floats.
+    pub data: Vec<f32>,
+}
+
+/// Sides and caps buffers of one mesh.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Layout {
+    /// Caps: 12 floats per triangle.
+    pub caps: Vec<f32>,
+    /// Non-empty side buckets in increasing k.
+    pub buckets: Vec<SideBucket>,
+}
+
+impl Layout {
+    /// Total side instances.
+    pub fn edge_instances(&self) -> u64 {
+        self.buckets.iter().map(|b| b.instances).sum()
+    }
+
+    /// Bytes of all side buckets.
+    pub fn sides_bytes(&self) -> u64 {
+        self.buckets.iter().map(|b| b.data.len() as u64 * 4).sum()
+    }
+
+    /// Bytes of the caps section.
+    pub fn caps_bytes(&self) -> u64 {
+        self.caps.len() as u64 * 4
+    }
+}
+
+/// Size of the paper's uniform layout, `16·(2 + maxMult)·e + 48·t`, with
+/// maxMult the largest opposite count (no splitting).
+pub fn paper_bytes(edges: u64, triangles: u64, max_fan: u32) -> u64 {
+    16 * (2 + max_fan as u64) * edges + 48 * triangles
+}
+
+/// Number of instances an edge with `n` opposite vertices adds to each bucket:
+/// `(full chunks in bucket K, size of the remainder chunk or 0)`.
+#[inline]
+pub fn split(n: u32, max_mult: u32) -> (u32, u32) {
+    (n / max_mult, n % max_mult)
+}
+
+/// Builds the sides and caps buffers. `max_mult` must be in `1..=MAX_MAX_MULT`.
+pub fn layout(welded: &Welded, edges: &Edges, max_mult: u32) -> Layout {
+    assert!((1..=MAX_MAX_MULT).contains(&max_mult), "max_mult out of range");
+    let k_max = max_mult as usize;
+    let pos = &welded.positions;
+
+    // Pass 1: instances per bucket.
+    let mut counts = vec![0u64; k_max + 1];
+    for e in 0..edges.len() {
+        let (full, rem) = split(edges.fan(e) as u32, max_mult);
+        counts[k_max] += full as u64;
+        if rem > 0 {
+            counts[rem as usize] += 1;
+        }
+    }
+    let mut data: Vec<Vec<f32>> = (0..=k_max)
+        .map(|k| Vec::with_capacity(counts[k] as usize * (2 + k) * 4))
+        .collect();
+
+    // Pass 2: fill, edge order, chunks in order.
+    for e in 0..edges.len() {
+        let a = pos[edges.a[e] as usize];
+        let b = pos[edges.b[e] as usize];
+        let opp = edges.opposites(e);
+        let n = opp.len() as f32;
+        for chunk in opp.chunks(k_max) {
+            let out = &mut data[chunk.len()];
+            out.extend_from_slice(&[a[0], a[1], a[2], chunk.len() as f32]);
+            out.extend_from_slice(&[b[0], b[1], b[2], n]);
+            for &o in chunk {
+                let o = pos[o as usize];
+                out.extend_from_slice(&[o[0], o[1], o[2], 1.0]);
+            }
+        }
+    }
+
+    let mut caps = Vec::with_capacity(welded.triangles.len() * 4);
+    for c in welded.triangles.chunks_exact(3) {
+        for &v in c {
+            let p = pos[v as usize];
+            caps.extend_from_slice(&[p[0], p[1], p[2], 1.0]);
+        }
+    }
+
+    let buckets = data
+        .into_iter()
+        .enumerate()
+        .filter(|(k, _)| counts[*k] > 0)
+        .map(|(k, d)| SideBucket {
+            k: k as u32,
+            instances: counts[k],
+            data: d,
+        })
+        .collect();
+    Layout { caps, buckets }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::topology::build_edges;
+    use crate::weld::weld;
+
+    fn fan(n: usize) -> Welded {
+        // Edge (0,0,0)-(1,0,0) with n fins.
+        let mut pos = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        let mut idx = Vec::new();
+        for i in 0..n {
+            let ang = i as f32 * 0.3;
+            pos.push([0.5, ang.cos(), ang.sin() + 2.0]);
+            idx.extend_from_slice(&[0, 1, (i + 2) as u32]);
+        }
+        weld(&pos, &idx)
+    }
+
+    #[test]
+    fn split_into_buckets() {
+        let w = fan(12);
+        let e = build_edges(&w.triangles, w.positions.len());
+        let l = layout(&w, &e, 5);
+        // Fan edge: 12 = 5 + 5 + 2; 24 fin edges have 1 opposite each.
+        let ks: Vec<(u32, u64)> = l.buckets.iter().map(|b| (b.k, b.instances)).collect();
+        assert_eq!(ks, vec![(1, 24), (2, 1), (5, 2)]);
+        for b in &l.buckets {
+            assert_eq!(b.data.len() as u64, b.instances * (2 + b.k as u64) * 4);
+        }
+        let b5 = &l.buckets[2].data;
+        assert_eq!(b5[3], 5.0); // A.w = used
+        assert_eq!(b5[7], 12.0); // B.w = total
+        assert_eq!(l.caps.len(), 12 * 12);
+        assert_eq!(l.sides_bytes(), 16 * (3 * 24 + 4 + 7 * 2));
+    }
+}
