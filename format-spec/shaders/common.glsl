@@ -1,6 +1,6 @@
 // svpack reference GLSL ES 1.00 — shared multiplicity code (format-spec/multiplicity.md).
 // Normative: the CPU evaluator (src/multiplicity.rs) performs the same f32
-// operations in the same order. Do not "simplify" with cross()/dot()/sign():
+// operations in the same order. Do not "simplify" with the cross, dot or sign builtins:
 // their internal evaluation order is unspecified.
 
 // Strict lexicographic order on (x, y, z). Files contain no -0.0 and no NaN.

@@ -96,7 +96,9 @@ fn base64(data: &[u8]) -> String {
     const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::new();
     for c in data.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
+        let n = (c[0] as u32) << 16
+            | (*c.get(1).unwrap_or(&0) as u32) << 8
+            | *c.get(2).unwrap_or(&0) as u32;
         for i in 0..4 {
             if i <= c.len() {
                 s.push(T[(n >> (18 - 6 * i) & 63) as usize] as char);
@@ -167,12 +169,20 @@ pub fn fixtures() -> Vec<(&'static str, Vec<u8>)> {
         sf.push([base, base + 1, base + 2]);
         sf.push([base, base + 2, base + 3]);
     }
-    out.push(("seamed_cube.obj", obj(&sv, &sf, "cube with 24 corners, welded back to 8")));
+    out.push((
+        "seamed_cube.obj",
+        obj(&sv, &sf, "cube with 24 corners, welded back to 8"),
+    ));
 
     out.push((
         "quad.obj",
         obj(
-            &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+            &[
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ],
             &[[0, 1, 2], [0, 2, 3]],
             "open quad, two triangles",
         ),
@@ -221,7 +231,10 @@ pub fn fixtures() -> Vec<(&'static str, Vec<u8>)> {
         [1, 5, 4],
         [4, 5, 0],
     ];
-    out.push(("two_tets.obj", obj(&tv, &tf, "two tetrahedra sharing one edge")));
+    out.push((
+        "two_tets.obj",
+        obj(&tv, &tf, "two tetrahedra sharing one edge"),
+    ));
 
     // Tetrahedron + duplicate face + reversed duplicate + 2 degenerates
     // (repeated index; distinct indices with equal positions).
@@ -231,7 +244,10 @@ pub fn fixtures() -> Vec<(&'static str, Vec<u8>)> {
     df.push([df[0][0], df[0][2], df[0][1]]);
     df.push([0, 0, 1]);
     df.push([0, 4, 2]);
-    out.push(("dup_degen.obj", obj(&dv, &df, "duplicate, reversed and degenerate triangles")));
+    out.push((
+        "dup_degen.obj",
+        obj(&dv, &df, "duplicate, reversed and degenerate triangles"),
+    ));
 
     out.push(("mirrored.gltf", mirrored_gltf()));
     out

@@ -15,7 +15,13 @@ fn bits(x: f32, y: f32, z: f32) -> P {
 }
 
 fn less(a: P, b: P) -> bool {
-    let f = |p: P| [f32::from_bits(p[0]), f32::from_bits(p[1]), f32::from_bits(p[2])];
+    let f = |p: P| {
+        [
+            f32::from_bits(p[0]),
+            f32::from_bits(p[1]),
+            f32::from_bits(p[2]),
+        ]
+    };
     let (a, b) = (f(a), f(b));
     a.partial_cmp(&b) == Some(std::cmp::Ordering::Less)
 }
@@ -48,11 +54,19 @@ pub fn check_file(svpk: &Path, input: &Path) {
             for i in 0..3 {
                 assert_eq!(r[4 * i + 3], 1.0, "caps w must be 1");
             }
-            [bits(r[0], r[1], r[2]), bits(r[4], r[5], r[6]), bits(r[8], r[9], r[10])]
+            [
+                bits(r[0], r[1], r[2]),
+                bits(r[4], r[5], r[6]),
+                bits(r[8], r[9], r[10]),
+            ]
         })
         .collect();
     assert_eq!(got.len(), expected.len(), "{}: caps count", input.display());
-    assert!(got == expected, "{}: caps differ from the input triangles", input.display());
+    assert!(
+        got == expected,
+        "{}: caps differ from the input triangles",
+        input.display()
+    );
 
     // Sides entries as a multiset of (A, B, O); per-edge totals for B.w.
     let mut pairs: HashMap<(P, P, P), i64> = HashMap::new();
@@ -77,7 +91,10 @@ pub fn check_file(svpk: &Path, input: &Path) {
         }
     }
     for (edge, (n, bw)) in &totals {
-        assert_eq!(*n as f32, *bw, "B.w of edge {edge:?} is not its opposite count");
+        assert_eq!(
+            *n as f32, *bw,
+            "B.w of edge {edge:?} is not its opposite count"
+        );
     }
     for t in &got {
         for e in 0..3 {

@@ -1,0 +1,190 @@
+//! Command-line behaviour: exit codes, error messages naming the file, no
+//! partial output, and the reader rejecting damaged files.
+
+mod common;
+
+use common::{svpack, write_fixtures};
+use predicates::prelude::*;
+
+fn no_stray_files(dir: &std::path::Path, allowed: &[&str]) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(
+            allowed.contains(&name.as_str()),
+            "unexpected file left behind: {name}"
+        );
+    }
+}
+
+#[test]
+fn missing_input_is_exit_1_and_names_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o.svpk");
+    svpack()
+        .args(["build", "no/such/model.obj", "-o"])
+        .arg(&out)
+        .assert()
+        .code(1)
+        .stderr(predicate::str::contains("no/such/model.obj"));
+    assert!(!out.exists());
+}
+
+#[test]
+fn usage_errors_are_exit_1() {
+    svpack().arg("frobnicate").assert().code(1);
+    svpack().args(["build", "x.obj"]).assert().code(1); // no -o
+    for bad in ["0", "14", "-1", "five"] {
+        svpack()
+            .args([
+                "build",
+                "fixtures/cube.obj",
+                "-o",
+                "/tmp/never.svpk",
+                &format!("--max-mult={bad}"),
+            ])
+            .assert()
+            .code(1)
+            .stderr(predicate::str::contains("max-mult"));
+    }
+    svpack().arg("--help").assert().code(0);
+    svpack().arg("--version").assert().code(0);
+}
+
+#[test]
+fn unknown_format_and_empty_models_are_rejected_without_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let txt = tmp.path().join("notes.txt");
+    std::fs::write(&txt, "hello").unwrap();
+    let pts = tmp.path().join("points.obj");
+    std::fs::write(&pts, "v 0 0 0\nv 1 0 0\np 1 2\n").unwrap();
+    let nan = tmp.path().join("nan.obj");
+    std::fs::write(&nan, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n").unwrap();
+    let out = tmp.path().join("o.svpk");
+    for (input, msg) in [
+        (&txt, "unknown input format"),
+        (&pts, "no triangles"),
+        (&nan, "non-finite"),
+    ] {
+        svpack()
+            .arg("build")
+            .arg(input)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .code(1)
+            .stderr(predicate::str::contains(
+                input.file_name().unwrap().to_str().unwrap(),
+            ))
+            .stderr(predicate::str::contains(msg));
+    }
+    no_stray_files(tmp.path(), &["notes.txt", "points.obj", "nan.obj"]);
+}
+
+#[test]
+fn failed_build_keeps_the_previous_output_intact() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let cube = &fx.iter().find(|f| f.0 == "cube.obj").unwrap().1;
+    let out = tmp.path().join("o.svpk");
+    svpack()
+        .arg("build")
+        .arg(cube)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    let before = std::fs::read(&out).unwrap();
+    let bad = tmp.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").unwrap();
+    svpack()
+        .arg("build")
+        .arg(&bad)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(1)
+        .stderr(predicate::str::contains("bad.obj"));
+    assert_eq!(std::fs::read(&out).unwrap(), before);
+}
+
+/// Damages a good file in several ways; inspect must say what is wrong, exit 1.
+#[test]
+fn inspect_rejects_damaged_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let src = &fx.iter().find(|f| f.0 == "two_tets.obj").unwrap().1;
+    let good = tmp.path().join("good.svpk");
+    svpack()
+        .arg("build")
+        .arg(src)
+        .arg("-o")
+        .arg(&good)
+        .assert()
+        .code(0);
+    svpack().arg("inspect").arg(&good).assert().code(0);
+    let bytes = std::fs::read(&good).unwrap();
+    let hlen = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+
+    let mut cases: Vec<(&str, Vec<u8>, &str)> = Vec::new();
+    cases.push(("empty", Vec::new(), "truncated"));
+    cases.push(("truncated_preamble", bytes[..10].to_vec(), "truncated"));
+    cases.push(("truncated_header", bytes[..40].to_vec(), "truncated"));
+    cases.push((
+        "truncated_payload",
+        bytes[..bytes.len() - 16].to_vec(),
+        "truncated",
+    ));
+    let mut extra = bytes.clone();
+    extra.extend_from_slice(&[0; 16]);
+    cases.push(("trailing", extra, "unexpected bytes"));
+    let mut magic = bytes.clone();
+    magic[0] = b'X';
+    cases.push(("magic", magic, "bad magic"));
+    let mut version = bytes.clone();
+    version[8] = 2;
+    cases.push(("version", version, "unsupported format version 2.0"));
+    let mut header = bytes.clone();
+    header[30] ^= 1;
+    cases.push(("header_bit", header, "header checksum"));
+    let mut payload = bytes.clone();
+    let last = payload.len() - 5;
+    payload[last] ^= 0x40;
+    cases.push(("payload_bit", payload, "payload checksum"));
+    let mut zstd_junk = vec![0x28, 0xB5, 0x2F, 0xFD];
+    zstd_junk.extend_from_slice(&[7; 20]);
+    cases.push(("zstd_junk", zstd_junk, "zstd"));
+    assert!(hlen > 0);
+
+    for (name, data, msg) in cases {
+        let p = tmp.path().join(format!("{name}.svpk"));
+        std::fs::write(&p, data).unwrap();
+        svpack()
+            .arg("inspect")
+            .arg(&p)
+            .assert()
+            .code(1)
+            .stderr(predicate::str::contains(format!("{name}.svpk")))
+            .stderr(predicate::str::contains(msg));
+    }
+}
+
+#[test]
+fn human_summary_mentions_the_essentials() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("c.svpk");
+    svpack()
+        .args(["build", "fixtures/fan12.obj", "-o"])
+        .arg(&out)
+        .assert()
+        .code(0)
+        .stdout(predicate::str::contains("12 triangles"))
+        .stdout(predicate::str::contains("max fan 12"))
+        .stdout(predicate::str::contains("k=5"))
+        .stdout(predicate::str::contains("paper layout"));
+    svpack()
+        .arg("inspect")
+        .arg(&out)
+        .assert()
+        .code(0)
+        .stdout(predicate::str::contains("max fan 12"));
+}
