@@ -1,7 +1,10 @@
 //! The build pipeline: load → check → weld → topology → layout → write.
 
 use crate::error::{Error, Result};
-use crate::format::{self, BuildOptions, HistogramEntry, Header, InputInfo, MeshHeader, MeshPayload, MeshStats, BucketHeader, Section};
+use crate::format::{
+    self, BucketHeader, BuildOptions, Header, HistogramEntry, InputInfo, MeshHeader, MeshPayload,
+    MeshStats, Section,
+};
 use crate::layout::{self, Layout, MAX_MAX_MULT};
 use crate::load::{self, Soup};
 use crate::topology::{self, Edges};
@@ -64,14 +67,20 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
             let where_ = || {
                 soup.parts
                     .iter()
-                    .find(|p| (t as u32) >= p.first_triangle && (t as u32) < p.first_triangle + p.triangle_count)
+                    .find(|p| {
+                        (t as u32) >= p.first_triangle
+                            && (t as u32) < p.first_triangle + p.triangle_count
+                    })
                     .map(|p| format!(" in {}", p.name))
                     .unwrap_or_default()
             };
             if i as usize >= n {
                 return Err(Error::input(
                     path,
-                    format!("triangle {t}{}: vertex index {i} out of range ({n} vertices)", where_()),
+                    format!(
+                        "triangle {t}{}: vertex index {i} out of range ({n} vertices)",
+                        where_()
+                    ),
                 ));
             }
             let p = soup.positions[i as usize];
@@ -210,7 +219,12 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
                 .collect(),
         },
         caps: &built.layout.caps,
-        buckets: built.layout.buckets.iter().map(|b| b.data.as_slice()).collect(),
+        buckets: built
+            .layout
+            .buckets
+            .iter()
+            .map(|b| b.data.as_slice())
+            .collect(),
     };
     let header = Header {
         payload_offset: 0,

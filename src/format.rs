@@ -216,7 +216,10 @@ fn crc_f32_le(hasher: &mut crc32fast::Hasher, floats: &[f32]) {
 
 /// Fills section offsets, lengths and the payload checksum into a header.
 /// Returns the encoded header bytes and the final header.
-pub fn finalize_header(mut header: Header, meshes: &[MeshPayload<'_>]) -> Result<(Vec<u8>, Header)> {
+pub fn finalize_header(
+    mut header: Header,
+    meshes: &[MeshPayload<'_>],
+) -> Result<(Vec<u8>, Header)> {
     header.meshes = meshes.iter().map(|m| m.header.clone()).collect();
     let encode = |h: &Header| {
         bincode::serde::encode_to_vec(h, bincode_config())
@@ -252,7 +255,11 @@ pub fn finalize_header(mut header: Header, meshes: &[MeshPayload<'_>]) -> Result
 }
 
 /// Encodes the whole file to `out` (uncompressed container bytes).
-pub fn encode_to<W: Write>(out: &mut W, header: Header, meshes: &[MeshPayload<'_>]) -> Result<Header> {
+pub fn encode_to<W: Write>(
+    out: &mut W,
+    header: Header,
+    meshes: &[MeshPayload<'_>],
+) -> Result<Header> {
     let (hbytes, header) = finalize_header(header, meshes)?;
     let io = |e: std::io::Error| Error::Other(format!("write failed: {e}"));
     let mut pre = [0u8; PREAMBLE_LEN];
@@ -282,7 +289,12 @@ pub fn container_len(header: &Header) -> u64 {
 /// Writes the file to `path` atomically (temp file in the same directory,
 /// then rename), optionally zstd-wrapped. Returns the final header and the
 /// number of bytes on disk.
-pub fn write_file(path: &Path, header: Header, meshes: &[MeshPayload<'_>], compress: bool) -> Result<(Header, u64)> {
+pub fn write_file(
+    path: &Path,
+    header: Header,
+    meshes: &[MeshPayload<'_>],
+    compress: bool,
+) -> Result<(Header, u64)> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -296,8 +308,10 @@ pub fn write_file(path: &Path, header: Header, meshes: &[MeshPayload<'_>], compr
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
     let header = if compress {
         let (_, probe) = finalize_header(header.clone(), meshes)?;
-        let mut enc = zstd::stream::Encoder::new(&mut w, ZSTD_LEVEL).map_err(|e| Error::io(path, e))?;
-        enc.include_contentsize(true).map_err(|e| Error::io(path, e))?;
+        let mut enc =
+            zstd::stream::Encoder::new(&mut w, ZSTD_LEVEL).map_err(|e| Error::io(path, e))?;
+        enc.include_contentsize(true)
+            .map_err(|e| Error::io(path, e))?;
         enc.set_pledged_src_size(Some(container_len(&probe)))
             .map_err(|e| Error::io(path, e))?;
         let h = encode_to(&mut enc, header, meshes).map_err(|e| with_path(e, path))?;
@@ -309,7 +323,11 @@ pub fn write_file(path: &Path, header: Header, meshes: &[MeshPayload<'_>], compr
     w.flush().map_err(|e| Error::io(path, e))?;
     drop(w);
     tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
-    let size = tmp.as_file().metadata().map_err(|e| Error::io(path, e))?.len();
+    let size = tmp
+        .as_file()
+        .metadata()
+        .map_err(|e| Error::io(path, e))?
+        .len();
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok((header, size))
 }
@@ -371,7 +389,8 @@ pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
         return Err(err("not an svpack file (bad magic)".into()));
     }
     let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
-    let u32_at = |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
+    let u32_at =
+        |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
     let (major, minor) = (u16_at(8), u16_at(10));
     if major != VERSION_MAJOR {
         return Err(err(format!(
@@ -380,7 +399,9 @@ pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
     }
     let header_len = u32_at(12) as usize;
     if header_len > HEADER_LIMIT {
-        return Err(err(format!("header length {header_len} exceeds the {HEADER_LIMIT}-byte limit")));
+        return Err(err(format!(
+            "header length {header_len} exceeds the {HEADER_LIMIT}-byte limit"
+        )));
     }
     if PREAMBLE_LEN + header_len > bytes.len() {
         return Err(err(format!(
@@ -393,11 +414,15 @@ pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
     if crc32fast::hash(hbytes) != u32_at(16) {
         return Err(err("header checksum mismatch (file corrupted)".into()));
     }
-    let (header, used): (Header, usize) = bincode::serde::decode_from_slice(hbytes, bincode_config())
-        .map_err(|e| err(format!("cannot decode header: {e}")))?;
+    let (header, used): (Header, usize) =
+        bincode::serde::decode_from_slice(hbytes, bincode_config())
+            .map_err(|e| err(format!("cannot decode header: {e}")))?;
     // Same major, newer minor: trailing header fields we do not know are fine.
     if used != header_len && minor <= VERSION_MINOR {
-        return Err(err(format!("header has {} trailing bytes", header_len - used)));
+        return Err(err(format!(
+            "header has {} trailing bytes",
+            header_len - used
+        )));
     }
     validate_layout(&header, header_len, bytes.len() as u64).map_err(err)?;
     let payload = &bytes[header.payload_offset as usize..];
@@ -415,7 +440,8 @@ pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
 
 fn decompress(path: &Path, data: &[u8]) -> Result<Vec<u8>> {
     use std::io::Read;
-    let dec = zstd::stream::Decoder::new(data).map_err(|e| Error::input(path, format!("zstd: {e}")))?;
+    let dec =
+        zstd::stream::Decoder::new(data).map_err(|e| Error::input(path, format!("zstd: {e}")))?;
     let mut out = Vec::new();
     dec.take(DECOMPRESSED_LIMIT + 1)
         .read_to_end(&mut out)
@@ -431,7 +457,11 @@ fn decompress(path: &Path, data: &[u8]) -> Result<Vec<u8>> {
 
 /// Checks that sections tile the payload exactly, in order, with the sizes their
 /// counts imply.
-fn validate_layout(h: &Header, header_len: usize, file_len: u64) -> std::result::Result<(), String> {
+fn validate_layout(
+    h: &Header,
+    header_len: usize,
+    file_len: u64,
+) -> std::result::Result<(), String> {
     let expect_payload = align_up((PREAMBLE_LEN + header_len) as u64);
     if h.payload_offset != expect_payload {
         return Err(format!(
@@ -439,7 +469,10 @@ fn validate_layout(h: &Header, header_len: usize, file_len: u64) -> std::result:
             h.payload_offset
         ));
     }
-    let end = h.payload_offset.checked_add(h.payload_len).ok_or("payload length overflows")?;
+    let end = h
+        .payload_offset
+        .checked_add(h.payload_len)
+        .ok_or("payload length overflows")?;
     if end != file_len {
         return Err(if end > file_len {
             format!("truncated file: payload ends at byte {end}, file has {file_len}")

@@ -79,7 +79,10 @@ pub fn split(n: u32, max_mult: u32) -> (u32, u32) {
 
 /// Builds the sides and caps buffers. `max_mult` must be in `1..=MAX_MAX_MULT`.
 pub fn layout(welded: &Welded, edges: &Edges, max_mult: u32) -> Layout {
-    assert!((1..=MAX_MAX_MULT).contains(&max_mult), "max_mult out of range");
+    assert!(
+        (1..=MAX_MAX_MULT).contains(&max_mult),
+        "max_mult out of range"
+    );
     let k_max = max_mult as usize;
     let pos = &welded.positions;
 

@@ -51,7 +51,10 @@ enum Command {
 
 fn print_summary(s: &Summary, json: bool) {
     if json {
-        println!("{}", serde_json::to_string_pretty(s).expect("summary serialises"));
+        println!(
+            "{}",
+            serde_json::to_string_pretty(s).expect("summary serialises")
+        );
     } else {
         print!("{}", s.to_text());
     }
@@ -103,7 +106,11 @@ fn main() -> ExitCode {
             // clap uses exit code 2 for usage errors; 2 is reserved for
             // validation failures here, so usage errors exit with 1.
             let _ = e.print();
-            return if e.use_stderr() { ExitCode::from(1) } else { ExitCode::SUCCESS };
+            return if e.use_stderr() {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            };
         }
     };
     match run(cli) {

@@ -200,7 +200,13 @@ impl Summary {
     /// Compact human-readable summary (gltfpack style), several lines.
     pub fn to_text(&self) -> String {
         let mut o = String::new();
-        let pct = |a: u64, b: u64| if b == 0 { 0.0 } else { 100.0 * a as f64 / b as f64 };
+        let pct = |a: u64, b: u64| {
+            if b == 0 {
+                0.0
+            } else {
+                100.0 * a as f64 / b as f64
+            }
+        };
         let _ = writeln!(
             o,
             "input:   {} ({}, {}): {} triangles, {} vertices, {} primitives",
@@ -250,7 +256,12 @@ impl Summary {
                 human_bytes(b.bytes)
             );
         }
-        let _ = writeln!(o, "caps:    {} triangles, {}", self.triangles, human_bytes(self.caps_bytes));
+        let _ = writeln!(
+            o,
+            "caps:    {} triangles, {}",
+            self.triangles,
+            human_bytes(self.caps_bytes)
+        );
         let _ = write!(
             o,
             "output:  {}{} (header {}; paper layout {}, ours {:.1}% of it)",

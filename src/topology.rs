@@ -72,7 +72,14 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
         start[i + 1] += start[i];
     }
     let mut fill = start.clone();
-    let mut recs = vec![Rec { b: 0, opp: 0, tri: 0 }; half_edges];
+    let mut recs = vec![
+        Rec {
+            b: 0,
+            opp: 0,
+            tri: 0
+        };
+        half_edges
+    ];
     for (t, c) in triangles.chunks_exact(3).enumerate() {
         for k in 0..3 {
             let (u, v, w) = (c[k], c[(k + 1) % 3], c[(k + 2) % 3]);
@@ -192,7 +199,10 @@ mod tests {
         let e = build_edges(&tris, 5);
         let i = (0..e.len()).find(|&i| e.a[i] == 0 && e.b[i] == 1).unwrap();
         assert_eq!(e.opposites(i), &[2, 3, 4, 2]);
-        assert_eq!(&e.opp_tri[e.opp_start[i] as usize..e.opp_start[i + 1] as usize], &[0, 1, 2, 3]);
+        assert_eq!(
+            &e.opp_tri[e.opp_start[i] as usize..e.opp_start[i + 1] as usize],
+            &[0, 1, 2, 3]
+        );
         let s = edge_stats(&e);
         assert_eq!(s.max_fan, 4);
         assert_eq!(s.non_manifold_edges, 1);

@@ -51,7 +51,11 @@ pub fn canonical(v: f32) -> f32 {
 #[inline(always)]
 fn order_key(v: f32) -> u32 {
     let b = v.to_bits();
-    if b & 0x8000_0000 != 0 { !b } else { b | 0x8000_0000 }
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
 }
 
 #[inline(always)]
@@ -150,11 +154,19 @@ mod tests {
         let w = weld(&pos, &idx);
         assert_eq!(w.positions.len(), 3);
         assert!(w.positions.windows(2).all(|p| lex_less(p[0], p[1])));
-        assert!(w.positions.iter().flatten().all(|v| v.to_bits() != (-0.0f32).to_bits()));
+        assert!(
+            w.positions
+                .iter()
+                .flatten()
+                .all(|v| v.to_bits() != (-0.0f32).to_bits())
+        );
         assert_eq!(w.triangle_count(), 2);
         // Both triangles are the same triangle, same winding.
         assert_eq!(w.triangles[0..3], w.triangles[3..6]);
-        assert_eq!(w.corners(0), [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        assert_eq!(
+            w.corners(0),
+            [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+        );
     }
 
     #[test]
@@ -178,7 +190,10 @@ mod tests {
     fn negative_values_order() {
         let pos = [[-2.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [-1.0, -3.0, 0.0]];
         let w = weld(&pos, &[0, 1, 2]);
-        assert_eq!(w.positions, vec![[-2.0, 0.0, 0.0], [-1.0, -3.0, 0.0], [-1.0, 0.0, 0.0]]);
+        assert_eq!(
+            w.positions,
+            vec![[-2.0, 0.0, 0.0], [-1.0, -3.0, 0.0], [-1.0, 0.0, 0.0]]
+        );
         assert_eq!(w.triangles, vec![0, 2, 1]);
     }
 }
