@@ -61,6 +61,9 @@ pub struct BuildOutput {
 /// Rejects non-finite positions used by any triangle and out-of-range
 /// indices, naming the part they come from.
 pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
+    if !soup.indices.len().is_multiple_of(3) {
+        return Err(Error::input(path, "index count is not a multiple of 3"));
+    }
     let n = soup.positions.len();
     for (t, c) in soup.indices.chunks_exact(3).enumerate() {
         for &i in c {
@@ -97,9 +100,6 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
                 ));
             }
         }
-    }
-    if soup.indices.len() % 3 != 0 {
-        return Err(Error::input(path, "index count is not a multiple of 3"));
     }
     Ok(())
 }

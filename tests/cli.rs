@@ -125,35 +125,61 @@ fn inspect_rejects_damaged_files() {
     let bytes = std::fs::read(&good).unwrap();
     let hlen = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
 
-    let mut cases: Vec<(&str, Vec<u8>, &str)> = Vec::new();
-    cases.push(("empty", Vec::new(), "truncated"));
-    cases.push(("truncated_preamble", bytes[..10].to_vec(), "truncated"));
-    cases.push(("truncated_header", bytes[..40].to_vec(), "truncated"));
-    cases.push((
-        "truncated_payload",
-        bytes[..bytes.len() - 16].to_vec(),
-        "truncated",
-    ));
-    let mut extra = bytes.clone();
-    extra.extend_from_slice(&[0; 16]);
-    cases.push(("trailing", extra, "unexpected bytes"));
-    let mut magic = bytes.clone();
-    magic[0] = b'X';
-    cases.push(("magic", magic, "bad magic"));
-    let mut version = bytes.clone();
-    version[8] = 2;
-    cases.push(("version", version, "unsupported format version 2.0"));
-    let mut header = bytes.clone();
-    header[30] ^= 1;
-    cases.push(("header_bit", header, "header checksum"));
-    let mut payload = bytes.clone();
-    let last = payload.len() - 5;
-    payload[last] ^= 0x40;
-    cases.push(("payload_bit", payload, "payload checksum"));
-    let mut zstd_junk = vec![0x28, 0xB5, 0x2F, 0xFD];
-    zstd_junk.extend_from_slice(&[7; 20]);
-    cases.push(("zstd_junk", zstd_junk, "zstd"));
-    assert!(hlen > 0);
+    let patched = |f: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = bytes.clone();
+        f(&mut b);
+        b
+    };
+    // A header whose checksum is right but whose sections lie: one more
+    // instance in the first bucket than the payload holds.
+    let lying_header = {
+        let mut h = svpack::format::read_file(&good).unwrap().header;
+        h.meshes[0].buckets[0].instances += 1;
+        let hb = bincode::serde::encode_to_vec(&h, bincode::config::legacy()).unwrap();
+        assert_eq!(hb.len(), hlen);
+        let mut b = bytes.clone();
+        b[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
+        b[24..24 + hlen].copy_from_slice(&hb);
+        b
+    };
+    let last = bytes.len() - 5;
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty", Vec::new(), "truncated"),
+        ("truncated_preamble", bytes[..10].to_vec(), "truncated"),
+        ("truncated_header", bytes[..40].to_vec(), "truncated"),
+        (
+            "truncated_payload",
+            bytes[..bytes.len() - 16].to_vec(),
+            "truncated",
+        ),
+        (
+            "trailing",
+            patched(&|b| b.extend_from_slice(&[0; 16])),
+            "unexpected bytes",
+        ),
+        ("magic", patched(&|b| b[0] = b'X'), "bad magic"),
+        (
+            "version",
+            patched(&|b| b[8] = 2),
+            "unsupported format version 2.0",
+        ),
+        ("header_bit", patched(&|b| b[30] ^= 1), "header checksum"),
+        (
+            "payload_bit",
+            patched(&|b| b[last] ^= 0x40),
+            "payload checksum",
+        ),
+        ("lying_header", lying_header, "bucket k=2"),
+        (
+            "zstd_junk",
+            [0x28, 0xB5, 0x2F, 0xFD]
+                .iter()
+                .chain(&[7u8; 20])
+                .copied()
+                .collect(),
+            "zstd",
+        ),
+    ];
 
     for (name, data, msg) in cases {
         let p = tmp.path().join(format!("{name}.svpk"));
