@@ -3,10 +3,12 @@
 //! Data path: [`load`] → [`weld`] → [`topology`] → [`layout`] → [`format`].
 pub mod build;
 pub mod error;
+pub mod evaluate;
 pub mod format;
 pub mod layout;
 pub mod load;
 pub mod multiplicity;
 pub mod report;
 pub mod topology;
+pub mod verify;
 pub mod weld;

@@ -38,6 +38,11 @@ enum Command {
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
+        /// After writing, run `verify` on the output (exit 2 if it fails).
+        #[arg(long)]
+        verify: bool,
+        #[command(flatten)]
+        lights: LightArgs,
     },
     /// Read a .svpk file back, check it, and report what it holds.
     Inspect {
@@ -47,6 +52,117 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Replay a .svpk file on the CPU: check the sides/caps bijection and,
+    /// per light, that the emitted shadow volume is closed. Exit 2 on failure.
+    Verify {
+        /// The .svpk file.
+        file: PathBuf,
+        /// Print the report as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        lights: LightArgs,
+    },
+}
+
+/// Light selection shared by `verify` and `build --verify`.
+#[derive(clap::Args)]
+struct LightArgs {
+    /// A light x,y,z,w (w = 1 point, w = 0 directional), world space;
+    /// repeatable. Negative and exponent values work: --light -1e6,2,-3.5,1
+    #[arg(long = "light", value_name = "X,Y,Z,W", allow_hyphen_values = true,
+          value_parser = parse_light)]
+    light: Vec<[f32; 4]>,
+    /// Number of lights chosen deterministically (around and inside the
+    /// bounds, on vertices, on edge lines, in triangle planes, directional
+    /// parallel to faces). Default 16 when no --light is given.
+    #[arg(long)]
+    lights: Option<usize>,
+    /// Seed for --lights.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Evaluator replayed: `reference` (the format's contract) or `kim`
+    /// (Kim 2008's per-edge light plane, to see it crack).
+    #[arg(long, value_enum, default_value_t = EvaluatorArg::Reference)]
+    evaluator: EvaluatorArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EvaluatorArg {
+    Reference,
+    Kim,
+}
+
+fn parse_light(s: &str) -> Result<[f32; 4], String> {
+    svpack::verify::parse_light(s)
+}
+
+/// Verifies `file` with the chosen lights and prints the report; returns
+/// whether everything held.
+fn run_verify(
+    file: &std::path::Path,
+    args: &LightArgs,
+    json: bool,
+) -> Result<bool, svpack::error::Error> {
+    let f = svpack::format::read_file(file)?;
+    let mut lights = args.light.clone();
+    let generated = args
+        .lights
+        .unwrap_or(if lights.is_empty() { 16 } else { 0 });
+    if generated > 0 && f.header.meshes.iter().any(|m| m.caps.count > 0) {
+        let d = svpack::verify::decode(&f, 0);
+        lights.extend(svpack::verify::choose_lights(&d, generated, args.seed));
+    }
+    let strategy = match args.evaluator {
+        EvaluatorArg::Reference => svpack::evaluate::Strategy::Reference,
+        EvaluatorArg::Kim => svpack::evaluate::Strategy::Kim,
+    };
+    let rep = svpack::verify::verify(&f, &lights, strategy);
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&rep).expect("report serialises")
+        );
+    } else {
+        println!(
+            "verify {}: {} triangles, {} edge instances, {} lights",
+            file.display(),
+            rep.triangles,
+            rep.edge_instances,
+            rep.lights.len()
+        );
+        println!(
+            "structure: {} bijection errors, {} record errors (wrong .w values or A >= B){}",
+            rep.bijection_errors,
+            rep.record_errors,
+            rep.first_problem
+                .as_deref()
+                .map(|p| format!(" (first: {p})"))
+                .unwrap_or_default()
+        );
+        println!(
+            "  light                                      silhouette    quads     caps  violations     ms"
+        );
+        for l in &rep.lights {
+            let name = format!(
+                "({}, {}, {}, {})",
+                l.light[0], l.light[1], l.light[2], l.light[3]
+            );
+            println!(
+                "  {name:<42} {:>10} {:>8} {:>8} {:>11} {:>6.1}",
+                l.silhouette_instances, l.side_quads, l.caps, l.closedness_violations, l.time_ms
+            );
+        }
+        println!(
+            "{}: {} closedness violations over {} lights ({} failing), {:.1} ms",
+            if rep.ok { "OK" } else { "FAILED" },
+            rep.closedness_violations,
+            rep.lights.len(),
+            rep.failing_lights,
+            rep.time_ms
+        );
+    }
+    Ok(rep.ok)
 }
 
 fn print_summary(s: &Summary, json: bool) {
@@ -60,7 +176,13 @@ fn print_summary(s: &Summary, json: bool) {
     }
 }
 
-fn run(cli: Cli) -> Result<(), svpack::error::Error> {
+/// Outcome of a command that ran without input errors.
+enum Outcome {
+    Ok,
+    ValidationFailed,
+}
+
+fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
     match cli.command {
         Command::Build {
             input,
@@ -68,6 +190,8 @@ fn run(cli: Cli) -> Result<(), svpack::error::Error> {
             max_mult,
             compress,
             json,
+            verify,
+            lights,
         } => {
             let out = build_file(&input, &output, &BuildConfig { max_mult, compress })?;
             for w in &out.warnings {
@@ -80,6 +204,9 @@ fn run(cli: Cli) -> Result<(), svpack::error::Error> {
                 println!("{} -> {}", input.display(), output.display());
             }
             print_summary(&s, json);
+            if verify && !run_verify(&output, &lights, json)? {
+                return Ok(Outcome::ValidationFailed);
+            }
         }
         Command::Inspect { file, json } => {
             let f = svpack::format::read_file(&file)?;
@@ -95,8 +222,13 @@ fn run(cli: Cli) -> Result<(), svpack::error::Error> {
             }
             print_summary(&s, json);
         }
+        Command::Verify { file, json, lights } => {
+            if !run_verify(&file, &lights, json)? {
+                return Ok(Outcome::ValidationFailed);
+            }
+        }
     }
-    Ok(())
+    Ok(Outcome::Ok)
 }
 
 fn main() -> ExitCode {
@@ -114,7 +246,8 @@ fn main() -> ExitCode {
         }
     };
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Outcome::Ok) => ExitCode::SUCCESS,
+        Ok(Outcome::ValidationFailed) => ExitCode::from(2),
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(1)

@@ -106,6 +106,37 @@ pub fn to_infinity(p: [f32; 3], l: Light) -> [f32; 4] {
     ]
 }
 
+/// Corner of the side quad that vertex `v` (0..5) of a side draw uses, for an
+/// edge with multiplicity `m != 0`: 0 = A, 1 = B, 2 = A at infinity, 3 = B at
+/// infinity (paper eqs. 3–5; spec §4). `m > 0` gives triangles (2, 1, 0) and
+/// (1, 2, 3); `m < 0` the same triangles reversed.
+#[inline(always)]
+pub fn side_corner(v: u32, m: i32) -> u32 {
+    if m > 0 {
+        if v > 2 { v - 2 } else { 2 - v }
+    } else if v > 2 {
+        6 - v
+    } else {
+        v
+    }
+}
+
+/// Corner of the cap pair that vertex `v` (0..5) of a caps draw uses, for a
+/// triangle with orientation `c != 0`: the index (0, 1, 2) into the stored
+/// corners after the swap that `c < 0` causes, and whether it is the back cap
+/// vertex at infinity. Front cap (P0, P1, P2), back cap (P2, P1, P0) at infinity.
+#[inline(always)]
+pub fn cap_corner(v: u32, c: i32) -> (u32, bool) {
+    let (corner, at_infinity) = if v < 3 { (v, false) } else { (5 - v, true) };
+    // c < 0 swaps P0 and P1 before the lookup.
+    let corner = if c < 0 && corner < 2 {
+        1 - corner
+    } else {
+        corner
+    };
+    (corner, at_infinity)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

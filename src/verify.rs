@@ -1,0 +1,605 @@
+//! `svpack verify`: replay a file on the CPU and prove its volumes are
+//! well-formed.
+//!
+//! 1. Structure: the (triangle, edge) pairs of the caps section and the (edge
+//!    instance, opposite slot) pairs of the sides buckets are in bijection,
+//!    with `A < B` and the documented `.w` values.
+//! 2. Closedness, per light: the triangles the reference shaders would emit
+//!    (|m| copies of each side quad with the winding its sign gives, front
+//!    caps, back caps at infinity), as homogeneous world-space vertices, form
+//!    a closed oriented surface: every undirected edge is used equally often
+//!    in both directions. Vertex identity is the exact f32 4-tuple, so this is
+//!    exact and combinatorial.
+//!
+//! All positions are first replaced by ids into one sorted table, so the
+//! checks work on integers.
+
+use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
+use crate::format::SvpkFile;
+use crate::multiplicity::{Light, cap_corner, lex_less, side_corner, to_infinity};
+use rustc_hash::FxHashMap;
+
+/// One mesh of a file, decoded for checking.
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    /// Distinct caps positions, lexicographically sorted; ids index this.
+    pub positions: Vec<[f32; 3]>,
+    /// Caps records as floats (12 per triangle), as the GPU reads them.
+    pub caps_data: Vec<f32>,
+    /// Caps corner ids.
+    pub caps: Vec<[u32; 3]>,
+    /// Side buckets.
+    pub buckets: Vec<DecodedBucket>,
+}
+
+/// One sides bucket, decoded.
+#[derive(Debug, Clone)]
+pub struct DecodedBucket {
+    /// Opposite slots per record.
+    pub k: usize,
+    /// Records as floats, `(2 + k) · 4` per record.
+    pub data: Vec<f32>,
+    /// A, B and opposite ids per record (`2 + k` ids each); `u32::MAX` for a
+    /// position that is not a caps corner.
+    pub ids: Vec<u32>,
+}
+
+impl DecodedBucket {
+    /// Number of records.
+    pub fn records(&self) -> usize {
+        self.ids.len() / (2 + self.k)
+    }
+}
+
+/// Sentinel id of a sides position that appears in no caps triangle.
+pub const UNKNOWN: u32 = u32::MAX;
+
+fn bits(p: [f32; 3]) -> [u32; 3] {
+    p.map(f32::to_bits)
+}
+
+/// Decodes mesh `index` of `file`.
+pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
+    let m = &file.header.meshes[index];
+    let caps_data = file.floats(m.caps.offset, m.caps.length);
+    let mut positions: Vec<[f32; 3]> = caps_data
+        .chunks_exact(4)
+        .map(|v| [v[0], v[1], v[2]])
+        .collect();
+    positions.sort_unstable_by(|a, b| {
+        if lex_less(*a, *b) {
+            std::cmp::Ordering::Less
+        } else if lex_less(*b, *a) {
+            std::cmp::Ordering::Greater
+        } else {
+            bits(*a).cmp(&bits(*b))
+        }
+    });
+    positions.dedup_by(|a, b| bits(*a) == bits(*b));
+    let lookup: FxHashMap<[u32; 3], u32> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (bits(*p), i as u32))
+        .collect();
+    let id = |p: [f32; 3]| *lookup.get(&bits(p)).unwrap_or(&UNKNOWN);
+    let caps = caps_data
+        .chunks_exact(12)
+        .map(|r| {
+            [
+                id([r[0], r[1], r[2]]),
+                id([r[4], r[5], r[6]]),
+                id([r[8], r[9], r[10]]),
+            ]
+        })
+        .collect();
+    let buckets = m
+        .buckets
+        .iter()
+        .map(|b| {
+            let data = file.floats(b.offset, b.length);
+            let ids = data
+                .chunks_exact(4)
+                .map(|v| id([v[0], v[1], v[2]]))
+                .collect();
+            DecodedBucket {
+                k: b.k as usize,
+                data,
+                ids,
+            }
+        })
+        .collect();
+    Decoded {
+        positions,
+        caps_data,
+        caps,
+        buckets,
+    }
+}
+
+/// Result of [`check_structure`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StructureReport {
+    /// (triangle, edge) pairs and (record, slot) pairs left unmatched.
+    pub bijection_errors: u64,
+    /// Records with A not lexicographically below B, or wrong `.w` values.
+    pub record_errors: u64,
+    /// First problem in words, if any.
+    pub first_problem: Option<String>,
+}
+
+impl StructureReport {
+    /// True when nothing is wrong.
+    pub fn ok(&self) -> bool {
+        self.bijection_errors == 0 && self.record_errors == 0
+    }
+}
+
+/// Check 1: bijection between caps (triangle, edge) pairs and sides
+/// (record, slot) pairs, plus per-record invariants.
+pub fn check_structure(d: &Decoded) -> StructureReport {
+    let mut rep = StructureReport::default();
+    let note = |rep: &mut StructureReport, msg: String| {
+        if rep.first_problem.is_none() {
+            rep.first_problem = Some(msg);
+        }
+    };
+    // (a, b, o) triples from the sides.
+    let mut sides: Vec<[u32; 3]> = Vec::new();
+    let mut edge_totals: FxHashMap<(u32, u32), (u64, f32)> = FxHashMap::default();
+    for b in &d.buckets {
+        let w = 2 + b.k;
+        for (r, (ids, f)) in b
+            .ids
+            .chunks_exact(w)
+            .zip(b.data.chunks_exact(4 * w))
+            .enumerate()
+        {
+            let (a, bb) = (ids[0], ids[1]);
+            let bad_order = a == UNKNOWN || bb == UNKNOWN || a >= bb;
+            let bad_w = f[3] != b.k as f32 || (0..b.k).any(|j| f[8 + 4 * j + 3] != 1.0);
+            if bad_order || bad_w {
+                rep.record_errors += 1;
+                note(
+                    &mut rep,
+                    format!(
+                        "bucket k={} record {r}: {}",
+                        b.k,
+                        if bad_order {
+                            "A is not below B (or not a caps corner)"
+                        } else {
+                            "wrong .w value"
+                        }
+                    ),
+                );
+            }
+            let t = edge_totals.entry((a, bb)).or_insert((0, f[7]));
+            t.0 += b.k as u64;
+            if t.1 != f[7] {
+                rep.record_errors += 1;
+                note(
+                    &mut rep,
+                    format!(
+                        "bucket k={} record {r}: B.w differs between chunks of one edge",
+                        b.k
+                    ),
+                );
+            }
+            for &o in &ids[2..] {
+                sides.push([a, bb, o]);
+            }
+        }
+    }
+    for ((a, b), (n, bw)) in &edge_totals {
+        if *n as f32 != *bw {
+            rep.record_errors += 1;
+            note(
+                &mut rep,
+                format!("edge {a}-{b}: B.w = {bw} but {n} opposite vertices are stored"),
+            );
+        }
+    }
+    // (a, b, o) triples from the caps.
+    let mut caps: Vec<[u32; 3]> = Vec::with_capacity(d.caps.len() * 3);
+    for t in &d.caps {
+        for e in 0..3 {
+            let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+            caps.push([p.min(q), p.max(q), o]);
+        }
+    }
+    sides.sort_unstable();
+    caps.sort_unstable();
+    // Merge: count entries present on one side only (multiset difference).
+    let (mut i, mut j) = (0, 0);
+    while i < sides.len() || j < caps.len() {
+        let take_side = j == caps.len() || (i < sides.len() && sides[i] < caps[j]);
+        let take_cap = i == sides.len() || (j < caps.len() && caps[j] < sides[i]);
+        if take_side {
+            rep.bijection_errors += 1;
+            note(
+                &mut rep,
+                format!(
+                    "sides entry (A, B, O) = {:?} matches no caps triangle",
+                    ids_to_points(d, sides[i])
+                ),
+            );
+            i += 1;
+        } else if take_cap {
+            rep.bijection_errors += 1;
+            note(
+                &mut rep,
+                format!(
+                    "caps (triangle, edge) {:?} has no sides entry",
+                    ids_to_points(d, caps[j])
+                ),
+            );
+            j += 1;
+        } else {
+            i += 1;
+            j += 1;
+        }
+    }
+    rep
+}
+
+fn ids_to_points(d: &Decoded, ids: [u32; 3]) -> Vec<Option<[f32; 3]>> {
+    ids.iter()
+        .map(|&i| d.positions.get(i as usize).copied())
+        .collect()
+}
+
+/// What the shaders decided for one light.
+#[derive(Debug, Clone)]
+pub struct Evaluation {
+    /// Cap orientation per triangle.
+    pub caps: Vec<i8>,
+    /// Multiplicity per record, per bucket.
+    pub sides: Vec<Vec<i8>>,
+}
+
+/// Runs the CPU evaluator for `light` over every record.
+pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
+    let mut caps = vec![0i8; d.caps.len()];
+    cap_signs_with(strategy, &d.caps_data, light, &mut caps);
+    let sides = d
+        .buckets
+        .iter()
+        .map(|b| {
+            let mut m = vec![0i8; b.records()];
+            side_multiplicities_with(strategy, b.k, &b.data, light, &mut m);
+            m
+        })
+        .collect();
+    Evaluation { caps, sides }
+}
+
+/// Per-light counters of check 2.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Closedness {
+    /// Records with m != 0.
+    pub silhouette_instances: u64,
+    /// Side quads drawn (sum of |m|).
+    pub side_quads: u64,
+    /// Caps with c != 0 (each draws a front and a back cap).
+    pub caps: u64,
+    /// Undirected edges of the emitted surface used unequally in the two directions.
+    pub violations: u64,
+}
+
+/// Check 2 for one light: emits what the shaders draw and counts unbalanced edges.
+pub fn check_closedness(d: &Decoded, light: Light, ev: &Evaluation) -> Closedness {
+    let n = d.positions.len() as u32;
+    // Vertex ids: finite positions 0..n; vertices at infinity n.. by distinct
+    // 4-tuple (different positions can extrude to the same point at infinity).
+    let mut inf: Vec<([u32; 3], u32)> = d
+        .positions
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            let q = to_infinity(p, light);
+            (
+                [q[0], q[1], q[2]].map(|v| if v == 0.0 { 0 } else { v.to_bits() }),
+                i as u32,
+            )
+        })
+        .collect();
+    inf.sort_unstable();
+    let mut inf_id = vec![0u32; d.positions.len()];
+    let mut next = n;
+    for (i, e) in inf.iter().enumerate() {
+        if i > 0 && inf[i - 1].0 != e.0 {
+            next += 1;
+        }
+        inf_id[e.1 as usize] = next;
+    }
+    let mut rep = Closedness::default();
+    // Signed directed-edge weights keyed by the undirected edge.
+    let mut edges: Vec<(u64, i32)> = Vec::new();
+    let mut emit = |tri: [u32; 3], weight: i32| {
+        for e in 0..3 {
+            let (x, y) = (tri[e], tri[(e + 1) % 3]);
+            if x == y {
+                continue; // a collapsed edge is its own reverse
+            }
+            let key = ((x.min(y) as u64) << 32) | x.max(y) as u64;
+            edges.push((key, if x < y { weight } else { -weight }));
+        }
+    };
+    for (t, &c) in d.caps.iter().zip(&ev.caps) {
+        if c == 0 {
+            continue;
+        }
+        rep.caps += 1;
+        let corner = |v: u32| {
+            let (i, at_inf) = cap_corner(v, c as i32);
+            let p = t[i as usize];
+            if at_inf { inf_id[p as usize] } else { p }
+        };
+        emit([corner(0), corner(1), corner(2)], 1);
+        emit([corner(3), corner(4), corner(5)], 1);
+    }
+    for (b, ms) in d.buckets.iter().zip(&ev.sides) {
+        for (ids, &m) in b.ids.chunks_exact(2 + b.k).zip(ms) {
+            if m == 0 {
+                continue;
+            }
+            rep.silhouette_instances += 1;
+            rep.side_quads += m.unsigned_abs() as u64;
+            let quad = [
+                ids[0],
+                ids[1],
+                inf_id[ids[0] as usize],
+                inf_id[ids[1] as usize],
+            ];
+            let corner = |v: u32| quad[side_corner(v, m as i32) as usize];
+            let w = m.unsigned_abs() as i32;
+            emit([corner(0), corner(1), corner(2)], w);
+            emit([corner(3), corner(4), corner(5)], w);
+        }
+    }
+    edges.sort_unstable_by_key(|e| e.0);
+    let mut i = 0;
+    while i < edges.len() {
+        let key = edges[i].0;
+        let mut sum = 0i64;
+        while i < edges.len() && edges[i].0 == key {
+            sum += edges[i].1 as i64;
+            i += 1;
+        }
+        if sum != 0 {
+            rep.violations += 1;
+        }
+    }
+    rep
+}
+
+/// Deterministic generator (SplitMix64) for light placement.
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    /// A generator for `seed`.
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+    /// Next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform index below `n` (n > 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+/// Chooses `count` lights deterministically from `seed`: point lights around
+/// and inside the bounds, directional lights, and hard placements — on
+/// vertices, on edge lines, in triangle planes, directional lights parallel to
+/// faces. Placements are computed in f32 and kept only when they are exact
+/// (e.g. `2·B − A` is on the line AB only if no rounding happened).
+pub fn choose_lights(d: &Decoded, count: usize, seed: u64) -> Vec<Light> {
+    let mut rng = Rng::new(seed);
+    let (lo, hi) = crate::build::bounds(&d.positions);
+    let c = [0, 1, 2].map(|k| 0.5 * (lo[k] as f64 + hi[k] as f64));
+    let ext = [0, 1, 2].map(|k| (hi[k] as f64 - lo[k] as f64).max(1e-30));
+    let size = ext.iter().cloned().fold(0.0, f64::max);
+    let mut out = Vec::with_capacity(count);
+    let tri = |rng: &mut Rng| -> [[f32; 3]; 3] {
+        let t = d.caps[rng.below(d.caps.len())];
+        t.map(|i| d.positions[i as usize])
+    };
+    let mut i = 0usize;
+    while out.len() < count {
+        let kind = i % 8;
+        i += 1;
+        let l: Option<Light> = match kind {
+            // Around the model, up to 3 sizes away.
+            0 | 1 => Some([0, 1, 2].map(|k| (c[k] + (rng.unit() - 0.5) * 6.0 * size) as f32))
+                .map(|p| [p[0], p[1], p[2], 1.0]),
+            // Inside the bounds.
+            2 => Some([0, 1, 2].map(|k| (lo[k] as f64 + rng.unit() * ext[k]) as f32))
+                .map(|p| [p[0], p[1], p[2], 1.0]),
+            // Directional, random direction.
+            3 => {
+                let v = [0, 1, 2].map(|_| (rng.unit() * 2.0 - 1.0) as f32);
+                (v != [0.0; 3]).then_some([v[0], v[1], v[2], 0.0])
+            }
+            // On a vertex.
+            4 => {
+                let p = tri(&mut rng)[rng.below(3)];
+                Some([p[0], p[1], p[2], 1.0])
+            }
+            // On the line of an edge, beyond B: exactly in the plane of every triangle on it.
+            5 => {
+                let t = tri(&mut rng);
+                let (a, b) = (t[0], t[1]);
+                let p = [0, 1, 2].map(|k| 2.0 * b[k] - a[k]);
+                let exact = (0..3).all(|k| p[k] as f64 == 2.0 * b[k] as f64 - a[k] as f64);
+                exact.then_some([p[0], p[1], p[2], 1.0])
+            }
+            // In a triangle's plane: A + (B − A) + (C − A), when exact.
+            6 => {
+                let t = tri(&mut rng);
+                let p = [0, 1, 2].map(|k| t[1][k] + t[2][k] - t[0][k]);
+                let exact =
+                    (0..3).all(|k| p[k] as f64 == t[1][k] as f64 + t[2][k] as f64 - t[0][k] as f64);
+                exact.then_some([p[0], p[1], p[2], 1.0])
+            }
+            // Directional, parallel to a face (along one of its edges), when exact.
+            _ => {
+                let t = tri(&mut rng);
+                let v = [0, 1, 2].map(|k| t[1][k] - t[0][k]);
+                let exact = (0..3).all(|k| v[k] as f64 == t[1][k] as f64 - t[0][k] as f64);
+                exact.then_some([v[0], v[1], v[2], 0.0])
+            }
+        };
+        if let Some(l) = l.filter(|l| l.iter().all(|v| v.is_finite())) {
+            out.push(l);
+        } else if i > 64 * count + 64 {
+            // Model too degenerate for exact hard placements: fill with generic lights.
+            let p = [0, 1, 2].map(|k| (c[k] + (rng.unit() - 0.5) * 6.0 * size) as f32);
+            out.push([p[0], p[1], p[2], 1.0]);
+        }
+    }
+    out
+}
+
+/// Per-light line of a verify report.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LightReport {
+    /// The light (x, y, z, w).
+    pub light: [f32; 4],
+    /// Side records with m != 0.
+    pub silhouette_instances: u64,
+    /// Side quads drawn (sum of |m|).
+    pub side_quads: u64,
+    /// Triangles whose caps are drawn (c != 0).
+    pub caps: u64,
+    /// Unbalanced edges of the emitted surface.
+    pub closedness_violations: u64,
+    /// Wall time for this light in milliseconds.
+    pub time_ms: f64,
+}
+
+/// Whole verify report (`svpack verify --json`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct VerifyReport {
+    /// True when every check holds.
+    pub ok: bool,
+    /// Meshes checked.
+    pub meshes: u64,
+    /// Triangles (caps records).
+    pub triangles: u64,
+    /// Side records.
+    pub edge_instances: u64,
+    /// Structure: unmatched (triangle, edge) / (record, slot) pairs.
+    pub bijection_errors: u64,
+    /// Structure: records with bad order or `.w` values.
+    pub record_errors: u64,
+    /// First structural problem, in words.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub first_problem: Option<String>,
+    /// Closedness violations summed over lights and meshes.
+    pub closedness_violations: u64,
+    /// Lights with any violation.
+    pub failing_lights: u64,
+    /// Per light (summed over meshes).
+    pub lights: Vec<LightReport>,
+    /// Total wall time in milliseconds.
+    pub time_ms: f64,
+}
+
+/// Runs checks 1 and 2 on every mesh of `file` for every light, evaluating
+/// the volumes with `strategy` (the format's is [`Strategy::Reference`]).
+pub fn verify(file: &SvpkFile, lights: &[Light], strategy: Strategy) -> VerifyReport {
+    let start = std::time::Instant::now();
+    let decoded: Vec<Decoded> = (0..file.header.meshes.len())
+        .map(|i| decode(file, i))
+        .collect();
+    let mut rep = VerifyReport {
+        ok: true,
+        meshes: decoded.len() as u64,
+        triangles: decoded.iter().map(|d| d.caps.len() as u64).sum(),
+        edge_instances: decoded
+            .iter()
+            .flat_map(|d| d.buckets.iter().map(|b| b.records() as u64))
+            .sum(),
+        bijection_errors: 0,
+        record_errors: 0,
+        first_problem: None,
+        closedness_violations: 0,
+        failing_lights: 0,
+        lights: Vec::new(),
+        time_ms: 0.0,
+    };
+    for d in &decoded {
+        let s = check_structure(d);
+        rep.bijection_errors += s.bijection_errors;
+        rep.record_errors += s.record_errors;
+        if rep.first_problem.is_none() {
+            rep.first_problem = s.first_problem;
+        }
+    }
+    for &light in lights {
+        let t = std::time::Instant::now();
+        let mut lr = LightReport {
+            light,
+            silhouette_instances: 0,
+            side_quads: 0,
+            caps: 0,
+            closedness_violations: 0,
+            time_ms: 0.0,
+        };
+        for d in &decoded {
+            let ev = evaluate(d, light, strategy);
+            let c = check_closedness(d, light, &ev);
+            lr.silhouette_instances += c.silhouette_instances;
+            lr.side_quads += c.side_quads;
+            lr.caps += c.caps;
+            lr.closedness_violations += c.violations;
+        }
+        lr.time_ms = t.elapsed().as_secs_f64() * 1e3;
+        rep.closedness_violations += lr.closedness_violations;
+        rep.failing_lights += (lr.closedness_violations > 0) as u64;
+        rep.lights.push(lr);
+    }
+    rep.ok = rep.bijection_errors == 0 && rep.record_errors == 0 && rep.closedness_violations == 0;
+    rep.time_ms = start.elapsed().as_secs_f64() * 1e3;
+    rep
+}
+
+/// Parses `x,y,z,w` (w must be 0 or 1) into a light.
+pub fn parse_light(s: &str) -> Result<Light, String> {
+    let v: Vec<&str> = s.split(',').map(str::trim).collect();
+    if v.len() != 4 {
+        return Err(format!("light `{s}`: expected x,y,z,w"));
+    }
+    let mut l = [0f32; 4];
+    for (k, t) in v.iter().enumerate() {
+        l[k] = t
+            .parse::<f32>()
+            .map_err(|e| format!("light `{s}`: `{t}`: {e}"))?;
+        if !l[k].is_finite() {
+            return Err(format!("light `{s}`: `{t}` is not finite"));
+        }
+    }
+    if l[3] != 0.0 && l[3] != 1.0 {
+        return Err(format!(
+            "light `{s}`: w must be 1 (point) or 0 (directional)"
+        ));
+    }
+    if l[3] == 0.0 && l[..3] == [0.0; 3] {
+        return Err(format!(
+            "light `{s}`: a directional light needs a nonzero direction"
+        ));
+    }
+    // -0.0 and +0.0 are the same light; keep the file's convention.
+    Ok(l.map(|v| if v == 0.0 { 0.0 } else { v }))
+}

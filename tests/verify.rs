@@ -1,0 +1,205 @@
+//! `svpack verify`: holds on good files, fails (exit 2, failure named) on
+//! broken files and broken evaluators.
+
+mod common;
+
+use common::{svpack, write_fixtures};
+use predicates::prelude::*;
+use svpack::evaluate::Strategy;
+use svpack::verify::{check_closedness, check_structure, decode, evaluate};
+
+/// Rewrites payload bytes of a built file and fixes both checksums, so only
+/// the semantic checks can notice.
+fn patch_payload(path: &std::path::Path, f: impl Fn(&mut [u8], &svpack::format::Header)) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let file = svpack::format::read_file(path).unwrap();
+    let mut h = file.header.clone();
+    let po = h.payload_offset as usize;
+    f(&mut bytes[po..], &h);
+    h.payload_crc32 = crc32fast::hash(&bytes[po..]);
+    let hb = bincode::serde::encode_to_vec(&h, bincode::config::legacy()).unwrap();
+    bytes[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
+    bytes[24..24 + hb.len()].copy_from_slice(&hb);
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn fixtures_verify_with_many_lights() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (name, path) in write_fixtures(tmp.path()) {
+        let out = tmp.path().join(format!("{name}.svpk"));
+        svpack()
+            .arg("build")
+            .arg(&path)
+            .arg("-o")
+            .arg(&out)
+            .arg("--verify")
+            .arg("--lights=64")
+            .assert()
+            .code(0);
+        let r = svpack()
+            .arg("verify")
+            .arg(&out)
+            .arg("--json")
+            .arg("--lights=64")
+            .arg("--light=-1e6,2,-3.5,1")
+            .output()
+            .unwrap();
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{name}: {}",
+            String::from_utf8_lossy(&r.stdout)
+        );
+        let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+        assert_eq!(j["ok"], true);
+        assert_eq!(j["lights"].as_array().unwrap().len(), 65);
+        assert_eq!(j["bijection_errors"], 0);
+        assert_eq!(j["closedness_violations"], 0);
+        // The explicit light is parsed with its sign and exponent.
+        assert_eq!(
+            j["lights"][0]["light"],
+            serde_json::json!([-1e6, 2.0, -3.5, 1.0])
+        );
+    }
+}
+
+#[test]
+fn bad_light_values_are_usage_errors() {
+    for bad in ["1,2,3", "1,2,3,0.5", "nan,0,0,1", "0,0,0,0", "a,b,c,d"] {
+        svpack()
+            .args(["verify", "whatever.svpk", &format!("--light={bad}")])
+            .assert()
+            .code(1)
+            .stderr(predicate::str::contains("light"));
+    }
+}
+
+#[test]
+fn flipped_opposite_sign_and_unswapped_cap_break_closedness() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let src = &fx.iter().find(|f| f.0 == "two_tets.obj").unwrap().1;
+    let out = tmp.path().join("t.svpk");
+    svpack()
+        .arg("build")
+        .arg(src)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    let file = svpack::format::read_file(&out).unwrap();
+    let d = decode(&file, 0);
+    assert!(check_structure(&d).ok());
+    let light = [0.3, 2.0, 0.7, 1.0];
+    let good = evaluate(&d, light, Strategy::Reference);
+    assert_eq!(check_closedness(&d, light, &good).violations, 0);
+
+    // One opposite vertex's contribution flipped: the edge's m changes by 2.
+    let mut bad = good.clone();
+    let (b, r) = (0..d.buckets.len())
+        .flat_map(|b| (0..good.sides[b].len()).map(move |r| (b, r)))
+        .find(|&(b, r)| good.sides[b][r] != 0)
+        .unwrap();
+    bad.sides[b][r] -= 2 * good.sides[b][r].signum();
+    assert!(check_closedness(&d, light, &bad).violations > 0);
+
+    // One cap drawn the wrong way round (orientation flipped for the cap only).
+    let mut bad = good.clone();
+    let t = good.caps.iter().position(|&c| c != 0).unwrap();
+    bad.caps[t] = -bad.caps[t];
+    assert!(check_closedness(&d, light, &bad).violations > 0);
+}
+
+#[test]
+fn corrupted_records_fail_structure_with_exit_2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let src = &fx.iter().find(|f| f.0 == "cube.obj").unwrap().1;
+    let cases: Vec<(&str, Box<dyn Fn(&mut [u8], &svpack::format::Header)>, &str)> = vec![
+        // O_0.w of the first sides record := -1 (a "negative" opposite vertex).
+        (
+            "opposite_w",
+            Box::new(|p, h| {
+                let at = (h.meshes[0].buckets[0].offset - h.payload_offset) as usize + 32 + 12;
+                p[at..at + 4].copy_from_slice(&(-1.0f32).to_le_bytes());
+            }),
+            "record_errors",
+        ),
+        // An opposite vertex moved: the pair no longer matches any triangle.
+        (
+            "moved_opposite",
+            Box::new(|p, h| {
+                let at = (h.meshes[0].buckets[0].offset - h.payload_offset) as usize + 32;
+                p[at..at + 4].copy_from_slice(&0.5f32.to_le_bytes());
+            }),
+            "bijection_errors",
+        ),
+        // A cap corner moved.
+        (
+            "moved_cap",
+            Box::new(|p, h| {
+                let at = (h.meshes[0].caps.offset - h.payload_offset) as usize;
+                p[at..at + 4].copy_from_slice(&0.25f32.to_le_bytes());
+            }),
+            "bijection_errors",
+        ),
+    ];
+    for (name, patch, msg) in cases {
+        let out = tmp.path().join(format!("{name}.svpk"));
+        svpack()
+            .arg("build")
+            .arg(src)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .code(0);
+        patch_payload(&out, patch);
+        svpack().arg("inspect").arg(&out).assert().code(0); // container is intact
+        let r = svpack()
+            .arg("verify")
+            .arg(&out)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert_eq!(r.status.code(), Some(2), "{name}");
+        let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+        assert_eq!(j["ok"], false, "{name}");
+        assert!(
+            j[msg].as_u64().unwrap() > 0,
+            "{name}: {msg} should be counted: {j}"
+        );
+        assert!(j["first_problem"].is_string(), "{name}: failure not named");
+    }
+}
+
+#[test]
+fn kim_evaluator_cracks_on_real_models_reference_does_not() {
+    let Some(shared) = common::shared_meshes() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("bunny.svpk");
+    svpack()
+        .arg("build")
+        .arg(shared.join("obj/stanford-bunny.obj"))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    svpack()
+        .arg("verify")
+        .arg(&out)
+        .arg("--lights=32")
+        .assert()
+        .code(0);
+    svpack()
+        .arg("verify")
+        .arg(&out)
+        .arg("--lights=32")
+        .arg("--evaluator=kim")
+        .assert()
+        .code(2)
+        .stdout(predicate::str::contains("closedness violations"))
+        .stdout(predicate::str::contains("FAILED"));
+}
