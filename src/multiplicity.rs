@@ -113,7 +113,8 @@ pub fn to_infinity(p: [f32; 3], l: Light) -> [f32; 4] {
 #[inline(always)]
 pub fn side_corner(v: u32, m: i32) -> u32 {
     if m > 0 {
-        if v > 2 { v - 2 } else { 2 - v }
+        // |v − 2|: v = 0, 1, 2 → 2, 1, 0 and v = 3, 4, 5 → 1, 2, 3.
+        v.abs_diff(2)
     } else if v > 2 {
         6 - v
     } else {
