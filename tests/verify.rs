@@ -116,7 +116,8 @@ fn corrupted_records_fail_structure_with_exit_2() {
     let tmp = tempfile::tempdir().unwrap();
     let fx = write_fixtures(tmp.path());
     let src = &fx.iter().find(|f| f.0 == "cube.obj").unwrap().1;
-    let cases: Vec<(&str, Box<dyn Fn(&mut [u8], &svpack::format::Header)>, &str)> = vec![
+    type Patch = Box<dyn Fn(&mut [u8], &svpack::format::Header)>;
+    let cases: Vec<(&str, Patch, &str)> = vec![
         // O_0.w of the first sides record := -1 (a "negative" opposite vertex).
         (
             "opposite_w",
