@@ -264,20 +264,27 @@ impl Summary {
         );
         let _ = write!(
             o,
-            "output:  {}{} (header {}; paper layout {}, ours {:.1}% of it)",
+            "output:  {}{}: header {}, sides {}, caps {}",
             human_bytes(self.file_bytes),
             if self.compressed {
-                format!(" zstd, {} uncompressed", human_bytes(self.container_bytes))
+                format!(" (zstd; {} uncompressed)", human_bytes(self.container_bytes))
             } else {
                 String::new()
             },
             human_bytes(self.header_bytes),
+            human_bytes(self.sides_bytes),
+            human_bytes(self.caps_bytes),
+        );
+        if let Some(ms) = self.time_ms {
+            let _ = write!(o, "; {ms:.1} ms");
+        }
+        let _ = write!(
+            o,
+            "\npaper:   uniform layout with maxMult = {} would be {}; sides + caps here are {:.1}% of it",
+            self.max_fan,
             human_bytes(self.paper_bytes),
             pct(self.sides_bytes + self.caps_bytes, self.paper_bytes)
         );
-        if let Some(ms) = self.time_ms {
-            let _ = write!(o, ", {ms:.1} ms");
-        }
         o.push('\n');
         o
     }

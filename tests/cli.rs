@@ -206,7 +206,7 @@ fn human_summary_mentions_the_essentials() {
         .stdout(predicate::str::contains("12 triangles"))
         .stdout(predicate::str::contains("max fan 12"))
         .stdout(predicate::str::contains("k=5"))
-        .stdout(predicate::str::contains("paper layout"));
+        .stdout(predicate::str::contains("uniform layout with maxMult = 12"));
     svpack()
         .arg("inspect")
         .arg(&out)
