@@ -155,8 +155,39 @@ pub struct MeshStats {
     pub non_manifold_edges: u64,
     /// Largest opposite-vertex count.
     pub max_fan: u32,
-    /// Edges by opposite-vertex count.
+    /// Edges by opposite-vertex count (JSON name `opposite_histogram`).
+    #[serde(rename = "opposite_histogram")]
     pub histogram: Vec<HistogramEntry>,
+}
+
+impl MeshStats {
+    /// Adds `other` into `self` (totals summed, `max_fan` maxed, histograms merged).
+    pub fn add(&mut self, other: &MeshStats) {
+        self.primitives += other.primitives;
+        self.input_triangles += other.input_triangles;
+        self.input_vertices += other.input_vertices;
+        self.welded_vertices += other.welded_vertices;
+        self.degenerate_triangles += other.degenerate_triangles;
+        self.skipped_points += other.skipped_points;
+        self.skipped_lines += other.skipped_lines;
+        self.triangles += other.triangles;
+        self.edges += other.edges;
+        self.edge_instances += other.edge_instances;
+        self.open_edges += other.open_edges;
+        self.non_manifold_edges += other.non_manifold_edges;
+        self.max_fan = self.max_fan.max(other.max_fan);
+        for e in &other.histogram {
+            match self
+                .histogram
+                .iter_mut()
+                .find(|h| h.opposites == e.opposites)
+            {
+                Some(h) => h.edges += e.edges,
+                None => self.histogram.push(*e),
+            }
+        }
+        self.histogram.sort_by_key(|h| h.opposites);
+    }
 }
 
 /// One histogram bar.

@@ -19,15 +19,6 @@ pub struct BucketSummary {
     pub bytes: u64,
 }
 
-/// One opposite-count histogram bar.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct HistogramSummary {
-    /// Opposite-vertex count.
-    pub opposites: u32,
-    /// Edges with that count.
-    pub edges: u64,
-}
-
 /// Everything `build --json` and `inspect --json` print (stable field names).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Summary {
@@ -45,34 +36,9 @@ pub struct Summary {
     pub max_mult: u32,
     /// Whether the file is zstd-wrapped.
     pub compressed: bool,
-    /// Triangle primitives / OBJ groups read.
-    pub primitives: u64,
-    /// Input triangles (before welding).
-    pub input_triangles: u64,
-    /// Input vertices.
-    pub input_vertices: u64,
-    /// Welded vertices.
-    pub welded_vertices: u64,
-    /// Dropped degenerate triangles.
-    pub degenerate_triangles: u64,
-    /// Skipped point primitives.
-    pub skipped_points: u64,
-    /// Skipped line primitives.
-    pub skipped_lines: u64,
-    /// Kept triangles (caps records).
-    pub triangles: u64,
-    /// Undirected edges.
-    pub edges: u64,
-    /// Side instances.
-    pub edge_instances: u64,
-    /// Edges with one opposite vertex.
-    pub open_edges: u64,
-    /// Edges with more than two opposite vertices.
-    pub non_manifold_edges: u64,
-    /// Largest opposite count.
-    pub max_fan: u32,
-    /// Edges by opposite count.
-    pub opposite_histogram: Vec<HistogramSummary>,
+    /// Totals over all meshes (flattened into the JSON object).
+    #[serde(flatten)]
+    pub stats: MeshStats,
     /// Side buckets.
     pub buckets: Vec<BucketSummary>,
     /// Sum of bucket bytes.
@@ -110,32 +76,11 @@ impl Summary {
     /// Summarises a header; `file_bytes` is the size on disk.
     pub fn from_header(h: &Header, file_bytes: u64, compressed: bool) -> Summary {
         // Whole-file totals over all meshes.
-        let mut s = MeshStats::default();
-        let mut hist: Vec<u64> = Vec::new();
+        let mut stats = MeshStats::default();
         let mut buckets: Vec<BucketSummary> = Vec::new();
         let mut caps_bytes = 0;
         for m in &h.meshes {
-            let t = &m.stats;
-            s.primitives += t.primitives;
-            s.input_triangles += t.input_triangles;
-            s.input_vertices += t.input_vertices;
-            s.welded_vertices += t.welded_vertices;
-            s.degenerate_triangles += t.degenerate_triangles;
-            s.skipped_points += t.skipped_points;
-            s.skipped_lines += t.skipped_lines;
-            s.triangles += t.triangles;
-            s.edges += t.edges;
-            s.edge_instances += t.edge_instances;
-            s.open_edges += t.open_edges;
-            s.non_manifold_edges += t.non_manifold_edges;
-            s.max_fan = s.max_fan.max(t.max_fan);
-            for e in &t.histogram {
-                let n = e.opposites as usize;
-                if n >= hist.len() {
-                    hist.resize(n + 1, 0);
-                }
-                hist[n] += e.edges;
-            }
+            stats.add(&m.stats);
             caps_bytes += m.caps.length;
             for b in &m.buckets {
                 match buckets.iter_mut().find(|x| x.k == b.k) {
@@ -161,35 +106,14 @@ impl Summary {
             input_sha256: hex(&h.input.sha256),
             max_mult: h.options.max_mult,
             compressed,
-            primitives: s.primitives,
-            input_triangles: s.input_triangles,
-            input_vertices: s.input_vertices,
-            welded_vertices: s.welded_vertices,
-            degenerate_triangles: s.degenerate_triangles,
-            skipped_points: s.skipped_points,
-            skipped_lines: s.skipped_lines,
-            triangles: s.triangles,
-            edges: s.edges,
-            edge_instances: s.edge_instances,
-            open_edges: s.open_edges,
-            non_manifold_edges: s.non_manifold_edges,
-            max_fan: s.max_fan,
-            opposite_histogram: hist
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| **c > 0)
-                .map(|(n, &c)| HistogramSummary {
-                    opposites: n as u32,
-                    edges: c,
-                })
-                .collect(),
+            stats: stats.clone(),
             buckets,
             sides_bytes,
             caps_bytes,
             header_bytes: h.payload_offset,
             container_bytes: h.payload_offset + h.payload_len,
             file_bytes,
-            paper_bytes: paper_bytes(s.edges, s.triangles, s.max_fan),
+            paper_bytes: paper_bytes(stats.edges, stats.triangles, stats.max_fan),
             bounds_min: h.bounds_min,
             bounds_max: h.bounds_max,
             time_ms: None,
@@ -213,29 +137,33 @@ impl Summary {
             self.input_file,
             self.input_format,
             human_bytes(self.input_bytes),
-            self.input_triangles,
-            self.input_vertices,
-            self.primitives
+            self.stats.input_triangles,
+            self.stats.input_vertices,
+            self.stats.primitives
         );
-        if self.skipped_points + self.skipped_lines > 0 {
+        if self.stats.skipped_points + self.stats.skipped_lines > 0 {
             let _ = writeln!(
                 o,
                 "skipped: {} point and {} line primitives",
-                self.skipped_points, self.skipped_lines
+                self.stats.skipped_points, self.stats.skipped_lines
             );
         }
         let _ = writeln!(
             o,
             "weld:    {} vertices, {} degenerate triangles dropped, {} triangles kept",
-            self.welded_vertices, self.degenerate_triangles, self.triangles
+            self.stats.welded_vertices, self.stats.degenerate_triangles, self.stats.triangles
         );
         let _ = writeln!(
             o,
             "edges:   {} ({} open, {} non-manifold, max fan {})",
-            self.edges, self.open_edges, self.non_manifold_edges, self.max_fan
+            self.stats.edges,
+            self.stats.open_edges,
+            self.stats.non_manifold_edges,
+            self.stats.max_fan
         );
         let hist: Vec<String> = self
-            .opposite_histogram
+            .stats
+            .histogram
             .iter()
             .map(|h| format!("{}:{}", h.opposites, h.edges))
             .collect();
@@ -243,7 +171,7 @@ impl Summary {
         let _ = writeln!(
             o,
             "sides:   {} instances, {} (K = {})",
-            self.edge_instances,
+            self.stats.edge_instances,
             human_bytes(self.sides_bytes),
             self.max_mult
         );
@@ -259,7 +187,7 @@ impl Summary {
         let _ = writeln!(
             o,
             "caps:    {} triangles, {}",
-            self.triangles,
+            self.stats.triangles,
             human_bytes(self.caps_bytes)
         );
         let _ = write!(
@@ -267,7 +195,10 @@ impl Summary {
             "output:  {}{}: header {}, sides {}, caps {}",
             human_bytes(self.file_bytes),
             if self.compressed {
-                format!(" (zstd; {} uncompressed)", human_bytes(self.container_bytes))
+                format!(
+                    " (zstd; {} uncompressed)",
+                    human_bytes(self.container_bytes)
+                )
             } else {
                 String::new()
             },
@@ -281,7 +212,7 @@ impl Summary {
         let _ = write!(
             o,
             "\npaper:   uniform layout with maxMult = {} would be {}; sides + caps here are {:.1}% of it",
-            self.max_fan,
+            self.stats.max_fan,
             human_bytes(self.paper_bytes),
             pct(self.sides_bytes + self.caps_bytes, self.paper_bytes)
         );
