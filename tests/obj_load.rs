@@ -930,11 +930,11 @@ fn odd_but_valid_files_load() {
     assert_eq!(soup.triangle_count(), 3);
 }
 
-/// Timing on big generated files; run with
+/// Big generated files and polygons (correctness; it also prints load times). Run with
 /// `cargo test --release --test obj_load -- --ignored --nocapture`.
 #[test]
 #[ignore]
-fn large_files_load_quickly() {
+fn large_files_and_big_polygons_load() {
     use std::fmt::Write;
     let tmp = tempfile::tempdir().unwrap();
     let side = 1000usize;
