@@ -22,9 +22,6 @@ impl Rng {
         self.0 ^= self.0 << 17;
         ((self.0 >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
     }
-    fn below(&mut self, n: usize) -> usize {
-        ((self.f() * 0.5 + 0.5) * n as f32) as usize % n
-    }
 }
 
 /// A triangle soup as OBJ text.
