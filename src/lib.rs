@@ -4,11 +4,13 @@
 pub mod build;
 pub mod error;
 pub mod evaluate;
+pub mod exact;
 pub mod format;
 pub mod layout;
 pub mod load;
 pub mod multiplicity;
 pub mod report;
+pub mod shadow;
 pub mod topology;
 pub mod verify;
 pub mod weld;

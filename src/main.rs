@@ -81,6 +81,10 @@ struct LightArgs {
     /// Seed for --lights.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Sample points per mesh for the shadow-truth check (in and around the
+    /// bounds, and on a receiver plane below the model); 0 skips the check.
+    #[arg(long, default_value_t = 256)]
+    samples: usize,
     /// Evaluator replayed: `reference` (the format's contract) or `kim`
     /// (Kim 2008's per-edge light plane, to see it crack).
     #[arg(long, value_enum, default_value_t = EvaluatorArg::Reference)]
@@ -117,7 +121,7 @@ fn run_verify(
         EvaluatorArg::Reference => svpack::evaluate::Strategy::Reference,
         EvaluatorArg::Kim => svpack::evaluate::Strategy::Kim,
     };
-    let rep = svpack::verify::verify(&f, &lights, strategy);
+    let rep = svpack::verify::verify(&f, &lights, strategy, args.samples);
     if json {
         println!(
             "{}",
@@ -141,7 +145,7 @@ fn run_verify(
                 .unwrap_or_default()
         );
         println!(
-            "  light                                      silhouette    quads     caps  violations     ms"
+            "  light                                      silhouette    quads     caps  violations  samples  on-face  mismatches     ms"
         );
         for l in &rep.lights {
             let name = format!(
@@ -149,14 +153,27 @@ fn run_verify(
                 l.light[0], l.light[1], l.light[2], l.light[3]
             );
             println!(
-                "  {name:<42} {:>10} {:>8} {:>8} {:>11} {:>6.1}",
-                l.silhouette_instances, l.side_quads, l.caps, l.closedness_violations, l.time_ms
+                "  {name:<42} {:>10} {:>8} {:>8} {:>11} {:>8} {:>8} {:>11} {:>6.1}",
+                l.silhouette_instances,
+                l.side_quads,
+                l.caps,
+                l.closedness_violations,
+                l.samples,
+                l.samples_on_faces,
+                l.sample_mismatches,
+                l.time_ms
             );
         }
+        if let Some(m) = &rep.first_mismatch {
+            println!("first mismatch: {m}");
+        }
         println!(
-            "{}: {} closedness violations over {} lights ({} failing), {:.1} ms",
+            "{}: {} closedness violations, {} sample mismatches ({} samples compared, {} on volume faces) over {} lights ({} failing), {:.1} ms",
             if rep.ok { "OK" } else { "FAILED" },
             rep.closedness_violations,
+            rep.sample_mismatches,
+            rep.samples,
+            rep.samples_on_faces,
             rep.lights.len(),
             rep.failing_lights,
             rep.time_ms

@@ -40,6 +40,15 @@ pub fn lex_less(a: [f32; 3], b: [f32; 3]) -> bool {
 /// operation rounded to f32 in exactly this order (see the spec, §2).
 #[inline(always)]
 pub fn ref_sign(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], l: Light) -> i32 {
+    // A point light exactly on a corner lies in the triangle's plane: the
+    // exact answer is 0, but (x × y)·d need not round to 0 (and a fused
+    // multiply-add on a GPU could spoil the other corners too). Extruding
+    // that corner would give the point (0, 0, 0, 0), which is no point.
+    if l[3] == 1.0
+        && (r0 == [l[0], l[1], l[2]] || r1 == [l[0], l[1], l[2]] || r2 == [l[0], l[1], l[2]])
+    {
+        return 0;
+    }
     // x = reference edge r0 → r2
     let x0 = r2[0] - r0[0];
     let x1 = r2[1] - r0[1];

@@ -484,6 +484,13 @@ pub struct LightReport {
     pub caps: u64,
     /// Unbalanced edges of the emitted surface.
     pub closedness_violations: u64,
+    /// Sample points compared with the exact shadow truth.
+    pub samples: u64,
+    /// Sample points exactly on a volume face (reported, not compared).
+    pub samples_on_faces: u64,
+    /// Samples whose volume winding number differs from the exact count of
+    /// triangles between them and the light.
+    pub sample_mismatches: u64,
     /// Wall time for this light in milliseconds.
     pub time_ms: f64,
 }
@@ -508,7 +515,16 @@ pub struct VerifyReport {
     pub first_problem: Option<String>,
     /// Closedness violations summed over lights and meshes.
     pub closedness_violations: u64,
-    /// Lights with any violation.
+    /// Samples compared, summed over lights.
+    pub samples: u64,
+    /// Samples on volume faces, summed over lights.
+    pub samples_on_faces: u64,
+    /// Shadow-truth mismatches, summed over lights.
+    pub sample_mismatches: u64,
+    /// First mismatch, in words.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub first_mismatch: Option<String>,
+    /// Lights with any violation or mismatch.
     pub failing_lights: u64,
     /// Per light (summed over meshes).
     pub lights: Vec<LightReport>,
@@ -516,9 +532,15 @@ pub struct VerifyReport {
     pub time_ms: f64,
 }
 
-/// Runs checks 1 and 2 on every mesh of `file` for every light, evaluating
-/// the volumes with `strategy` (the format's is [`Strategy::Reference`]).
-pub fn verify(file: &SvpkFile, lights: &[Light], strategy: Strategy) -> VerifyReport {
+/// Runs checks 1, 2 and 3 on every mesh of `file` for every light, evaluating
+/// the volumes with `strategy` (the format's is [`Strategy::Reference`]);
+/// check 3 uses `samples` points per mesh (0 skips it).
+pub fn verify(
+    file: &SvpkFile,
+    lights: &[Light],
+    strategy: Strategy,
+    samples: usize,
+) -> VerifyReport {
     let start = std::time::Instant::now();
     let decoded: Vec<Decoded> = (0..file.header.meshes.len())
         .map(|i| decode(file, i))
@@ -535,6 +557,10 @@ pub fn verify(file: &SvpkFile, lights: &[Light], strategy: Strategy) -> VerifyRe
         record_errors: 0,
         first_problem: None,
         closedness_violations: 0,
+        samples: 0,
+        samples_on_faces: 0,
+        sample_mismatches: 0,
+        first_mismatch: None,
         failing_lights: 0,
         lights: Vec::new(),
         time_ms: 0.0,
@@ -547,6 +573,14 @@ pub fn verify(file: &SvpkFile, lights: &[Light], strategy: Strategy) -> VerifyRe
             rep.first_problem = s.first_problem;
         }
     }
+    let indexes: Vec<crate::shadow::ShadowIndex> = decoded
+        .iter()
+        .map(crate::shadow::ShadowIndex::new)
+        .collect();
+    let points: Vec<Vec<[f32; 3]>> = decoded
+        .iter()
+        .map(|d| crate::shadow::choose_samples(d, samples, 1))
+        .collect();
     for &light in lights {
         let t = std::time::Instant::now();
         let mut lr = LightReport {
@@ -555,11 +589,28 @@ pub fn verify(file: &SvpkFile, lights: &[Light], strategy: Strategy) -> VerifyRe
             side_quads: 0,
             caps: 0,
             closedness_violations: 0,
+            samples: 0,
+            samples_on_faces: 0,
+            sample_mismatches: 0,
             time_ms: 0.0,
         };
-        for d in &decoded {
+        for ((d, index), pts) in decoded.iter().zip(&indexes).zip(&points) {
             let ev = evaluate(d, light, strategy);
             let c = check_closedness(d, light, &ev);
+            if !pts.is_empty() {
+                let sh = crate::shadow::check_shadow(d, index, light, &ev, pts);
+                lr.samples += sh.samples;
+                lr.samples_on_faces += sh.on_faces;
+                lr.sample_mismatches += sh.mismatches;
+                if rep.first_mismatch.is_none() {
+                    rep.first_mismatch = sh.first_mismatch.map(|m| {
+                        format!(
+                            "light ({}, {}, {}, {}): {m}",
+                            light[0], light[1], light[2], light[3]
+                        )
+                    });
+                }
+            }
             lr.silhouette_instances += c.silhouette_instances;
             lr.side_quads += c.side_quads;
             lr.caps += c.caps;
@@ -567,10 +618,16 @@ pub fn verify(file: &SvpkFile, lights: &[Light], strategy: Strategy) -> VerifyRe
         }
         lr.time_ms = t.elapsed().as_secs_f64() * 1e3;
         rep.closedness_violations += lr.closedness_violations;
-        rep.failing_lights += (lr.closedness_violations > 0) as u64;
+        rep.samples += lr.samples;
+        rep.samples_on_faces += lr.samples_on_faces;
+        rep.sample_mismatches += lr.sample_mismatches;
+        rep.failing_lights += (lr.closedness_violations > 0 || lr.sample_mismatches > 0) as u64;
         rep.lights.push(lr);
     }
-    rep.ok = rep.bijection_errors == 0 && rep.record_errors == 0 && rep.closedness_violations == 0;
+    rep.ok = rep.bijection_errors == 0
+        && rep.record_errors == 0
+        && rep.closedness_violations == 0
+        && rep.sample_mismatches == 0;
     rep.time_ms = start.elapsed().as_secs_f64() * 1e3;
     rep
 }

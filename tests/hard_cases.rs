@@ -273,7 +273,7 @@ fn build_and_verify(dir: &Path, c: &Case, extra_generated: usize) -> svpack::ver
     let file = svpack::format::read_file(&output).unwrap();
     let mut lights = c.lights.clone();
     lights.extend(choose_lights(&decode(&file, 0), extra_generated, 7));
-    verify(&file, &lights, Eval::Reference)
+    verify(&file, &lights, Eval::Reference, 128)
 }
 
 #[test]
@@ -296,10 +296,12 @@ fn hard_cases_verify_with_64_lights() {
             rep.first_problem
         );
         eprintln!(
-            "{}: {} triangles, {} lights, silhouette instances {}..{}",
+            "{}: {} triangles, {} lights, {} samples ({} on faces), silhouette instances {}..{}",
             c.name,
             rep.triangles,
             rep.lights.len(),
+            rep.samples,
+            rep.samples_on_faces,
             rep.lights
                 .iter()
                 .map(|l| l.silhouette_instances)
@@ -328,7 +330,7 @@ fn hard_cases_crack_the_naive_evaluator() {
         let file = svpack::format::read_file(&output).unwrap();
         let mut lights = c.lights.clone();
         lights.extend(choose_lights(&decode(&file, 0), 64, 7));
-        if !verify(&file, &lights, Eval::Kim).ok {
+        if !verify(&file, &lights, Eval::Kim, 128).ok {
             cracked.push(c.name);
         }
     }
@@ -378,7 +380,7 @@ proptest! {
         match build_file(&input, &output, &BuildConfig::default()) {
             Ok(_) => {
                 let file = svpack::format::read_file(&output).unwrap();
-                let rep = verify(&file, &lights, Eval::Reference);
+                let rep = verify(&file, &lights, Eval::Reference, 128);
                 prop_assert!(rep.ok, "{:?}", rep);
             }
             // Only an all-degenerate soup may fail to build.
@@ -406,8 +408,14 @@ fn shared_models_verify() {
         }
         let file = svpack::format::read_file(&out).unwrap();
         let lights = choose_lights(&decode(&file, 0), 16, 3);
-        let rep = verify(&file, &lights, Eval::Reference);
-        assert!(rep.ok, "{}: {:?}", f.display(), rep.first_problem);
+        let rep = verify(&file, &lights, Eval::Reference, 64);
+        assert!(
+            rep.ok,
+            "{}: {:?} {:?}",
+            f.display(),
+            rep.first_problem,
+            rep.first_mismatch
+        );
         checked += 1;
     }
     assert!(checked >= 20);

@@ -56,6 +56,11 @@ fn fixtures_verify_with_many_lights() {
         assert_eq!(j["lights"].as_array().unwrap().len(), 65);
         assert_eq!(j["bijection_errors"], 0);
         assert_eq!(j["closedness_violations"], 0);
+        assert_eq!(j["sample_mismatches"], 0);
+        assert!(
+            j["samples"].as_u64().unwrap() > 65 * 200,
+            "{name}: too few samples compared"
+        );
         // The explicit light is parsed with its sign and exponent.
         assert_eq!(
             j["lights"][0]["light"],
@@ -103,6 +108,21 @@ fn flipped_opposite_sign_and_unswapped_cap_break_closedness() {
         .unwrap();
     bad.sides[b][r] -= 2 * good.sides[b][r].signum();
     assert!(check_closedness(&d, light, &bad).violations > 0);
+
+    // Every sign negated: still closed (a consistently inverted volume), but
+    // the shadow is wrong; only the shadow-truth check can see that.
+    let mut inverted = good.clone();
+    inverted.caps.iter_mut().for_each(|c| *c = -*c);
+    inverted.sides.iter_mut().flatten().for_each(|m| *m = -*m);
+    assert_eq!(check_closedness(&d, light, &inverted).violations, 0);
+    let index = svpack::shadow::ShadowIndex::new(&d);
+    let samples = svpack::shadow::choose_samples(&d, 256, 1);
+    let truth = svpack::shadow::check_shadow(&d, &index, light, &good, &samples);
+    assert_eq!(truth.mismatches, 0);
+    assert!(truth.samples > 200);
+    let wrong = svpack::shadow::check_shadow(&d, &index, light, &inverted, &samples);
+    assert!(wrong.mismatches > 0, "inverted volume not caught");
+    assert!(wrong.first_mismatch.unwrap().contains("winding -"));
 
     // One cap drawn the wrong way round (orientation flipped for the cap only).
     let mut bad = good.clone();
@@ -203,4 +223,34 @@ fn kim_evaluator_cracks_on_real_models_reference_does_not() {
         .code(2)
         .stdout(predicate::str::contains("closedness violations"))
         .stdout(predicate::str::contains("FAILED"));
+}
+
+#[test]
+fn samples_on_volume_faces_are_reported_not_compared() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let src = &fx.iter().find(|f| f.0 == "quad.obj").unwrap().1;
+    let out = tmp.path().join("q.svpk");
+    svpack()
+        .arg("build")
+        .arg(src)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    let file = svpack::format::read_file(&out).unwrap();
+    let d = decode(&file, 0);
+    let light = [0.5, 0.5, 1.0, 1.0];
+    let ev = evaluate(&d, light, Strategy::Reference);
+    let index = svpack::shadow::ShadowIndex::new(&d);
+    let on_faces = [
+        [0.25, 0.5, 0.0],   // on the quad itself (front cap)
+        [0.5, -0.5, -1.0],  // in the side plane through the edge y = 0 and the light
+        [-0.5, -0.5, -1.0], // on the line from the light through the corner (0, 0, 0)
+    ];
+    let r = svpack::shadow::check_shadow(&d, &index, light, &ev, &on_faces);
+    assert_eq!((r.on_faces, r.samples, r.mismatches), (3, 0, 0), "{r:?}");
+    let clear = [[0.3, 0.6, -1.0], [3.0, 0.5, -1.0], [0.5, 0.5, 0.5]];
+    let r = svpack::shadow::check_shadow(&d, &index, light, &ev, &clear);
+    assert_eq!((r.on_faces, r.samples, r.mismatches), (0, 3, 0), "{r:?}");
 }

@@ -12,6 +12,12 @@ bool svLess(vec3 a, vec3 b) {
 
 // Sign of ((r2 - r0) x (L.xyz - r0 * L.w)) . (r1 - r0) for sorted r0 < r1 < r2.
 float svRefSign(vec3 r0, vec3 r1, vec3 r2, vec4 L) {
+    // A point light exactly on a corner: in the plane, exactly 0.
+    if (L.w == 1.0) {
+        if (r0.x == L.x && r0.y == L.y && r0.z == L.z) return 0.0;
+        if (r1.x == L.x && r1.y == L.y && r1.z == L.z) return 0.0;
+        if (r2.x == L.x && r2.y == L.y && r2.z == L.z) return 0.0;
+    }
     vec3 x = r2 - r0;
     vec3 y = vec3(L.x - r0.x * L.w, L.y - r0.y * L.w, L.z - r0.z * L.w);
     vec3 d = r1 - r0;

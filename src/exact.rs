@@ -1,0 +1,281 @@
+//! Exact sign of a 4×4 determinant whose entries are f32 values (held in
+//! f64): the one predicate the shadow-truth check needs, for homogeneous
+//! points `(x, y, z, w)` with `w ∈ {0, 1}` — finite points and points at
+//! infinity alike.
+//!
+//! A floating-point evaluation with a proven error bound decides almost every
+//! call; the rest are decided exactly with big integers (every f32 is an
+//! integer times a power of two, so the determinant is an exact sum of 24
+//! integer products). `robust::orient3d` covers only finite points, which is
+//! why this exists.
+
+use num_bigint::BigInt;
+
+/// Homogeneous point or vector; every entry must be an f32 value.
+pub type H = [f64; 4];
+
+/// The 24 permutations of 0..4 with their signs.
+const PERMS: [([usize; 4], i8); 24] = {
+    let mut out = [([0usize; 4], 0i8); 24];
+    let mut n = 0;
+    let mut a = 0;
+    while a < 4 {
+        let mut b = 0;
+        while b < 4 {
+            let mut c = 0;
+            while c < 4 {
+                let mut d = 0;
+                while d < 4 {
+                    if a != b && a != c && a != d && b != c && b != d && c != d {
+                        let p = [a, b, c, d];
+                        // Parity by counting inversions.
+                        let mut inv = 0;
+                        let mut i = 0;
+                        while i < 4 {
+                            let mut j = i + 1;
+                            while j < 4 {
+                                if p[i] > p[j] {
+                                    inv += 1;
+                                }
+                                j += 1;
+                            }
+                            i += 1;
+                        }
+                        out[n] = (p, if inv % 2 == 0 { 1 } else { -1 });
+                        n += 1;
+                    }
+                    d += 1;
+                }
+                c += 1;
+            }
+            b += 1;
+        }
+        a += 1;
+    }
+    out
+};
+
+/// Sign (−1, 0, +1) of `det[r0; r1; r2; r3]` (rows), exactly.
+pub fn det4_sign(r: [H; 4]) -> i32 {
+    // Filter: Leibniz sum in f64. Each product of four f32 values has
+    // relative error at most 3u (u = 2^-53; no overflow or underflow is
+    // possible for f32 inputs), and summing 24 terms adds at most 23u of the
+    // sum of magnitudes; 32u covers both with margin.
+    let mut sum = 0.0f64;
+    let mut mag = 0.0f64;
+    for (p, s) in PERMS.iter() {
+        let t = r[0][p[0]] * r[1][p[1]] * r[2][p[2]] * r[3][p[3]];
+        sum += if *s > 0 { t } else { -t };
+        mag += t.abs();
+    }
+    let bound = mag * (32.0 * f64::EPSILON / 2.0);
+    if sum > bound {
+        return 1;
+    }
+    if sum < -bound {
+        return -1;
+    }
+    if mag == 0.0 {
+        return 0;
+    }
+    exact_sign(r)
+}
+
+/// Decomposes an f32 value into `m · 2^e` with integer `m`.
+fn split(v: f64) -> (i64, i32) {
+    let f = v as f32;
+    debug_assert_eq!(f as f64, v, "entry is not an f32 value");
+    if f == 0.0 {
+        return (0, 0);
+    }
+    let bits = f.to_bits();
+    let sign = if bits >> 31 != 0 { -1 } else { 1 };
+    let exp = ((bits >> 23) & 0xff) as i32;
+    let frac = (bits & 0x7f_ffff) as i64;
+    let (m, e) = if exp == 0 {
+        (frac, -149)
+    } else {
+        (frac | 0x80_0000, exp - 150)
+    };
+    (sign * m, e)
+}
+
+fn exact_sign(r: [H; 4]) -> i32 {
+    let parts: Vec<Vec<(i64, i32)>> = r
+        .iter()
+        .map(|row| row.iter().map(|&v| split(v)).collect())
+        .collect();
+    let mut terms: Vec<(i128, i32)> = Vec::with_capacity(24);
+    for (p, s) in PERMS.iter() {
+        let mut m: i128 = *s as i128;
+        let mut e = 0;
+        for (row, &col) in p.iter().enumerate() {
+            let (mi, ei) = parts[row][col];
+            m *= mi as i128;
+            e += ei;
+        }
+        if m != 0 {
+            terms.push((m, e));
+        }
+    }
+    let Some(emin) = terms.iter().map(|t| t.1).min() else {
+        return 0;
+    };
+    let mut acc = BigInt::from(0);
+    for (m, e) in terms {
+        acc += BigInt::from(m) << ((e - emin) as usize);
+    }
+    match acc.sign() {
+        num_bigint::Sign::Plus => 1,
+        num_bigint::Sign::Minus => -1,
+        num_bigint::Sign::NoSign => 0,
+    }
+}
+
+/// Where the open segment from `a` to `b` (all positive combinations of the
+/// two homogeneous points) meets a triangle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Meet {
+    /// No contact.
+    None,
+    /// A transversal crossing of the interior; the value is the sign of
+    /// `det[t0; t1; t2; a]` (which side `a` starts on).
+    Cross(i32),
+    /// `a` lies on the triangle (interior or boundary).
+    AOnTriangle,
+    /// The segment touches an edge or vertex of the triangle: ambiguous.
+    Degenerate,
+}
+
+/// Classifies the segment `a → b` against triangle `t` (homogeneous corners;
+/// a triangle whose corners are all at infinity is met where `b` is at
+/// infinity too, i.e. the crossing happens at the end of a ray).
+pub fn meet(a: H, b: H, t: [H; 3]) -> Meet {
+    let all_inf = t.iter().all(|v| v[3] == 0.0);
+    let fa = det4_sign([t[0], t[1], t[2], a]);
+    if !all_inf {
+        let fb = det4_sign([t[0], t[1], t[2], b]);
+        if fa != 0 && fa == fb {
+            return Meet::None;
+        }
+        if fb == 0 && fa != 0 {
+            // The segment reaches the plane only at its excluded end b.
+            return Meet::None;
+        }
+        if fa == 0 && fb == 0 {
+            return Meet::None; // segment in the plane: no transversal contact
+        }
+    } else if fa == 0 {
+        return Meet::None;
+    }
+    let s = [
+        det4_sign([a, b, t[0], t[1]]),
+        det4_sign([a, b, t[1], t[2]]),
+        det4_sign([a, b, t[2], t[0]]),
+    ];
+    let pos = s.iter().filter(|&&x| x > 0).count();
+    let neg = s.iter().filter(|&&x| x < 0).count();
+    if pos > 0 && neg > 0 {
+        return Meet::None;
+    }
+    if pos == 0 && neg == 0 {
+        return Meet::Degenerate;
+    }
+    let inside = pos == 3 || neg == 3;
+    if all_inf {
+        // The three signs are those of the cone coefficients of b's
+        // direction times −fa (expand the determinants along w): equal to
+        // +fa means the opposite direction lies in the cone, not b's.
+        let sign = if pos > 0 { 1 } else { -1 };
+        if sign == fa {
+            return Meet::None;
+        }
+    }
+    if fa == 0 {
+        return Meet::AOnTriangle; // a in the plane, on the line's hit point
+    }
+    if inside {
+        Meet::Cross(fa)
+    } else {
+        Meet::Degenerate
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(x: f32, y: f32, z: f32) -> H {
+        [x as f64, y as f64, z as f64, 1.0]
+    }
+    fn d(x: f32, y: f32, z: f32) -> H {
+        [x as f64, y as f64, z as f64, 0.0]
+    }
+
+    #[test]
+    fn determinant_signs() {
+        // orient of a unit tetrahedron, both orders.
+        let r = [
+            p(0.0, 0.0, 0.0),
+            p(1.0, 0.0, 0.0),
+            p(0.0, 1.0, 0.0),
+            p(0.0, 0.0, 1.0),
+        ];
+        let s = det4_sign(r);
+        assert_ne!(s, 0);
+        assert_eq!(det4_sign([r[1], r[0], r[2], r[3]]), -s);
+        // Coplanar points: exactly zero, even with awkward values.
+        let a = p(0.1, 0.2, 0.3);
+        let b = p(1e7, 0.2, 0.3);
+        let c = p(0.1, 3e-8, 0.3);
+        let e = p(-5.5, 1e-30, 0.3);
+        assert_eq!(det4_sign([a, b, c, e]), 0);
+        // Nearly coplanar: one ulp off the plane z = 0.3.
+        let f = p(-5.5, 1e-30, f32::from_bits(0.3f32.to_bits() + 1));
+        assert_ne!(det4_sign([a, b, c, f]), 0);
+    }
+
+    #[test]
+    fn segment_meets_triangle() {
+        let t = [p(0.0, 0.0, 0.0), p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0)];
+        assert!(matches!(
+            meet(p(0.2, 0.2, -1.0), p(0.2, 0.2, 1.0), t),
+            Meet::Cross(_)
+        ));
+        assert_eq!(meet(p(0.2, 0.2, 1.0), p(0.2, 0.2, 2.0), t), Meet::None);
+        assert_eq!(meet(p(2.0, 2.0, -1.0), p(2.0, 2.0, 1.0), t), Meet::None);
+        assert_eq!(
+            meet(p(0.5, 0.0, -1.0), p(0.5, 0.0, 1.0), t),
+            Meet::Degenerate
+        );
+        assert_eq!(
+            meet(p(0.2, 0.2, 0.0), p(0.2, 0.2, 1.0), t),
+            Meet::AOnTriangle
+        );
+        // Ray to infinity (b at infinity) and a triangle with a corner at infinity.
+        assert!(matches!(
+            meet(p(0.2, 0.2, -1.0), d(0.0, 0.0, 1.0), t),
+            Meet::Cross(_)
+        ));
+        let wedge = [p(0.0, 0.0, 0.0), p(1.0, 0.0, 0.0), d(0.0, 1.0, 0.0)];
+        assert!(matches!(
+            meet(p(0.5, 5.0, -1.0), p(0.5, 5.0, 1.0), wedge),
+            Meet::Cross(_)
+        ));
+        assert_eq!(
+            meet(p(-0.5, 5.0, -1.0), p(-0.5, 5.0, 1.0), wedge),
+            Meet::None
+        );
+        // Opposite crossing directions give opposite signs.
+        let up = meet(p(0.2, 0.2, -1.0), p(0.2, 0.2, 1.0), t);
+        let down = meet(p(0.2, 0.2, 1.0), p(0.2, 0.2, -1.0), t);
+        assert!(matches!((up, down), (Meet::Cross(x), Meet::Cross(y)) if x == -y));
+        // A triangle at infinity (directions) is met by the ray whose
+        // direction lies in its cone, not by the opposite ray.
+        let sky = [d(1.0, 0.0, 1.0), d(0.0, 1.0, 1.0), d(-1.0, -1.0, 1.0)];
+        let o = p(5.0, -3.0, 2.0);
+        assert!(matches!(meet(o, d(0.0, 0.0, 1.0), sky), Meet::Cross(_)));
+        assert_eq!(meet(o, d(0.0, 0.0, -1.0), sky), Meet::None);
+        assert_eq!(meet(o, d(1.0, 0.0, 0.0), sky), Meet::None);
+    }
+}

@@ -1,0 +1,493 @@
+//! Check 3 of `verify`: shadow truth at sample points.
+//!
+//! For a sample point P and a light L, the winding number of the emitted
+//! volume at P (signed crossings of a ray from P in a generic direction, with
+//! the exact predicate of [`crate::exact`]) must equal the exact number of
+//! input triangles crossed by the open segment from L to P (for a directional
+//! light: the ray from P towards the light). A sample whose truth or ray
+//! touches an edge, a vertex or a face exactly is *on a face*: reported
+//! separately, not compared.
+//!
+//! Filters keep this fast: a bounding-volume hierarchy over the triangles
+//! (which are both the truth's occluders and the front caps) answers segment
+//! and ray queries conservatively; back caps, which all lie at infinity, are
+//! crossed or not depending only on the ray direction, so their contribution
+//! is computed once per direction.
+
+use crate::exact::{H, Meet, meet};
+use crate::multiplicity::{Light, side_corner, to_infinity};
+use crate::verify::{Decoded, Evaluation, Rng};
+use rayon::prelude::*;
+use std::sync::OnceLock;
+
+/// Generic ray directions (f32 values), tried in order until a sample's ray
+/// touches no edge or vertex exactly.
+const DIRECTIONS: [[f32; 3]; 6] = [
+    [0.381_966, 0.723_607, 0.575_195],
+    [-0.618_034, 0.265_041, 0.740_212],
+    [0.835_813, -0.446_554, 0.319_284],
+    [-0.225_307, -0.866_025, 0.446_918],
+    [0.507_107, 0.129_731, -0.852_116],
+    [-0.734_522, -0.352_941, -0.579_571],
+];
+
+fn fin(p: [f32; 3]) -> H {
+    [p[0] as f64, p[1] as f64, p[2] as f64, 1.0]
+}
+
+fn hom(p: [f32; 4]) -> H {
+    p.map(|v| v as f64)
+}
+
+/// Bounding-volume hierarchy over triangles given as corner positions.
+struct Bvh {
+    /// Per node: min xyz, max xyz.
+    boxes: Vec<[f64; 6]>,
+    /// Per node: (first, count, 0) for leaves (count > 0), (left, 0, right) for inner nodes.
+    nodes: Vec<(u32, u32, u32)>,
+    /// Triangle order referenced by leaves.
+    order: Vec<u32>,
+}
+
+impl Bvh {
+    fn new(tris: &[[[f32; 3]; 3]]) -> Bvh {
+        let mut bvh = Bvh {
+            boxes: Vec::new(),
+            nodes: Vec::new(),
+            order: (0..tris.len() as u32).collect(),
+        };
+        if !tris.is_empty() {
+            let n = tris.len();
+            bvh.build(tris, 0, n);
+        }
+        bvh
+    }
+
+    fn bbox(tris: &[[[f32; 3]; 3]], ids: &[u32]) -> [f64; 6] {
+        let mut b = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for &i in ids {
+            for p in &tris[i as usize] {
+                for k in 0..3 {
+                    b[k] = b[k].min(p[k] as f64);
+                    b[k + 3] = b[k + 3].max(p[k] as f64);
+                }
+            }
+        }
+        b
+    }
+
+    fn build(&mut self, tris: &[[[f32; 3]; 3]], first: usize, count: usize) -> u32 {
+        let node = self.nodes.len() as u32;
+        let b = Self::bbox(tris, &self.order[first..first + count]);
+        self.boxes.push(b);
+        self.nodes.push((first as u32, count as u32, 0));
+        if count <= 4 {
+            return node;
+        }
+        let axis = (0..3)
+            .max_by(|&x, &y| (b[x + 3] - b[x]).total_cmp(&(b[y + 3] - b[y])))
+            .unwrap();
+        let key = |i: &u32| -> f64 { tris[*i as usize].iter().map(|p| p[axis] as f64).sum() };
+        let mid = count / 2;
+        self.order[first..first + count]
+            .select_nth_unstable_by(mid, |a, c| key(a).total_cmp(&key(c)));
+        let left = self.build(tris, first, mid);
+        let right = self.build(tris, first + mid, count - mid);
+        self.nodes[node as usize] = (left, 0, right);
+        node
+    }
+
+    /// Calls `f` for every triangle whose box may meet `p + t·dir`, t in [0, t_max].
+    fn query(&self, p: [f64; 3], dir: [f64; 3], t_max: f64, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            if !hits(&self.boxes[n as usize], p, dir, t_max) {
+                continue;
+            }
+            let (a, count, right) = self.nodes[n as usize];
+            if count > 0 {
+                for &i in &self.order[a as usize..(a + count) as usize] {
+                    f(i);
+                }
+            } else {
+                stack.push(a);
+                stack.push(right);
+            }
+        }
+    }
+}
+
+/// Conservative slab test (boxes padded well beyond f64 rounding).
+fn hits(b: &[f64; 6], p: [f64; 3], dir: [f64; 3], t_max: f64) -> bool {
+    let (mut t0, mut t1) = (0.0f64, t_max);
+    for k in 0..3 {
+        let pad = 1e-9 * (b[k + 3] - b[k]).abs().max(b[k].abs()).max(b[k + 3].abs()) + 1e-300;
+        let (lo, hi) = (b[k] - pad, b[k + 3] + pad);
+        if dir[k] == 0.0 {
+            if p[k] < lo || p[k] > hi {
+                return false;
+            }
+            continue;
+        }
+        let (mut a, mut c) = ((lo - p[k]) / dir[k], (hi - p[k]) / dir[k]);
+        if a > c {
+            std::mem::swap(&mut a, &mut c);
+        }
+        // Widen by a relative margin: the divisions above round.
+        let m = 1e-9 * (a.abs().max(c.abs())) + 1e-300;
+        t0 = t0.max(a - m);
+        t1 = t1.min(c + m);
+        if t0 > t1 {
+            return false;
+        }
+    }
+    true
+}
+
+/// Per-mesh state reused for every light.
+pub struct ShadowIndex {
+    tris: Vec<[[f32; 3]; 3]>,
+    bvh: Bvh,
+}
+
+impl ShadowIndex {
+    /// Indexes the caps triangles of a decoded mesh.
+    pub fn new(d: &Decoded) -> ShadowIndex {
+        let tris: Vec<[[f32; 3]; 3]> = d
+            .caps
+            .iter()
+            .map(|t| t.map(|i| d.positions[i as usize]))
+            .collect();
+        let bvh = Bvh::new(&tris);
+        ShadowIndex { tris, bvh }
+    }
+}
+
+/// Sample points: half in and around the bounds, half on a receiver plane
+/// below the model (y up, as in glTF), all f32.
+pub fn choose_samples(d: &Decoded, count: usize, seed: u64) -> Vec<[f32; 3]> {
+    let (lo, hi) = crate::build::bounds(&d.positions);
+    let c = [0, 1, 2].map(|k| 0.5 * (lo[k] as f64 + hi[k] as f64));
+    let size = (0..3)
+        .map(|k| hi[k] as f64 - lo[k] as f64)
+        .fold(1e-30, f64::max);
+    let mut rng = Rng::new(seed ^ 0x5A5A_5A5A);
+    (0..count)
+        .map(|i| {
+            if i % 2 == 0 {
+                [0, 1, 2].map(|k| (c[k] + (rng.unit() - 0.5) * 1.5 * size) as f32)
+            } else {
+                [
+                    (c[0] + (rng.unit() - 0.5) * 3.0 * size) as f32,
+                    (lo[1] as f64 - 0.25 * size) as f32,
+                    (c[2] + (rng.unit() - 0.5) * 3.0 * size) as f32,
+                ]
+            }
+        })
+        .collect()
+}
+
+/// Result of the shadow-truth check for one light.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ShadowReport {
+    /// Samples compared.
+    pub samples: u64,
+    /// Samples lying exactly on a volume face (not compared).
+    pub on_faces: u64,
+    /// Samples whose winding number differs from the exact occluder count.
+    pub mismatches: u64,
+    /// The first mismatch, in words.
+    pub first_mismatch: Option<String>,
+}
+
+/// Side triangles bucketed by their projection along a ray direction, over
+/// the projected bounds of the samples: a ray from P along the direction can
+/// only cross triangles whose projection contains P's (a conservative filter;
+/// the exact test decides).
+struct SideGrid {
+    u: [f64; 3],
+    v: [f64; 3],
+    lo: [f64; 2],
+    cell: [f64; 2],
+    cells: Vec<Vec<u32>>,
+}
+
+const GRID: usize = 48;
+
+impl SideGrid {
+    fn new(sides: &[Emitted], dir: [f32; 3], samples: &[[f32; 3]]) -> SideGrid {
+        let d = dir.map(|x| x as f64);
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let d = d.map(|x| x / n);
+        let a = if d[0].abs() < 0.5 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let u = cross(d, a);
+        let un = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+        let u = u.map(|x| x / un);
+        let v = cross(d, u);
+        let proj = |q: [f64; 3]| {
+            [
+                q[0] * u[0] + q[1] * u[1] + q[2] * u[2],
+                q[0] * v[0] + q[1] * v[1] + q[2] * v[2],
+            ]
+        };
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for s in samples {
+            let q = proj(s.map(|x| x as f64));
+            for k in 0..2 {
+                lo[k] = lo[k].min(q[k]);
+                hi[k] = hi[k].max(q[k]);
+            }
+        }
+        let span = (0..2)
+            .map(|k| hi[k] - lo[k])
+            .fold(0.0, f64::max)
+            .max(1e-300);
+        for k in 0..2 {
+            lo[k] -= 1e-6 * span;
+            hi[k] += 1e-6 * span;
+        }
+        let cell = [0, 1].map(|k| (hi[k] - lo[k]) / GRID as f64);
+        let mut cells = vec![Vec::new(); GRID * GRID];
+        for (i, e) in sides.iter().enumerate() {
+            let mut blo = [f64::INFINITY; 2];
+            let mut bhi = [f64::NEG_INFINITY; 2];
+            for c in &e.corners {
+                let q = proj([c[0], c[1], c[2]]);
+                let scale = c[0].abs().max(c[1].abs()).max(c[2].abs());
+                if c[3] == 0.0 {
+                    // A direction: the region is unbounded where it points.
+                    for k in 0..2 {
+                        let tol = 1e-9 * scale;
+                        if q[k] > -tol {
+                            bhi[k] = f64::INFINITY;
+                        }
+                        if q[k] < tol {
+                            blo[k] = f64::NEG_INFINITY;
+                        }
+                    }
+                } else {
+                    for k in 0..2 {
+                        let pad = 1e-9 * scale + 1e-300;
+                        blo[k] = blo[k].min(q[k] - pad);
+                        bhi[k] = bhi[k].max(q[k] + pad);
+                    }
+                }
+            }
+            if (0..2).any(|k| bhi[k] < lo[k] || blo[k] > hi[k]) {
+                continue;
+            }
+            let range = |k: usize| {
+                let a = ((blo[k] - lo[k]) / cell[k]).floor().max(0.0) as usize;
+                let b = ((bhi[k] - lo[k]) / cell[k]).floor().min((GRID - 1) as f64) as usize;
+                a.min(GRID - 1)..=b
+            };
+            for y in range(1) {
+                for x in range(0) {
+                    cells[y * GRID + x].push(i as u32);
+                }
+            }
+        }
+        SideGrid {
+            u,
+            v,
+            lo,
+            cell,
+            cells,
+        }
+    }
+
+    fn candidates(&self, s: [f32; 3]) -> &[u32] {
+        let q = s.map(|x| x as f64);
+        let pu = q[0] * self.u[0] + q[1] * self.u[1] + q[2] * self.u[2];
+        let pv = q[0] * self.v[0] + q[1] * self.v[1] + q[2] * self.v[2];
+        let x = (((pu - self.lo[0]) / self.cell[0]).floor().max(0.0) as usize).min(GRID - 1);
+        let y = (((pv - self.lo[1]) / self.cell[1]).floor().max(0.0) as usize).min(GRID - 1);
+        &self.cells[y * GRID + x]
+    }
+}
+
+/// A triangle the shaders emit, with its stencil weight.
+struct Emitted {
+    corners: [H; 3],
+    weight: i32,
+}
+
+/// Checks `samples` against the volume emitted under `ev` for `light`.
+pub fn check_shadow(
+    d: &Decoded,
+    index: &ShadowIndex,
+    light: Light,
+    ev: &Evaluation,
+    samples: &[[f32; 3]],
+) -> ShadowReport {
+    let inf = |p: [f32; 3]| hom(to_infinity(p, light));
+    // Triangles with two equal corners (e.g. every back cap of a directional
+    // light) have no area and no boundary: no ray crosses them. A corner
+    // (0, 0, 0, 0) cannot occur (the contract gives 0 when the light is on a
+    // corner), but would be no point at all.
+    let usable = |c: &[H; 3]| {
+        c[0] != c[1]
+            && c[1] != c[2]
+            && c[0] != c[2]
+            && !c.iter().any(|h| h.iter().all(|&v| v == 0.0))
+    };
+    // Side triangles and back caps (front caps are the indexed triangles).
+    let mut sides: Vec<Emitted> = Vec::new();
+    let mut backs: Vec<Emitted> = Vec::new();
+    for (b, ms) in d.buckets.iter().zip(&ev.sides) {
+        for (ids, &m) in b.ids.chunks_exact(2 + b.k).zip(ms) {
+            if m == 0 {
+                continue;
+            }
+            let (pa, pb) = (d.positions[ids[0] as usize], d.positions[ids[1] as usize]);
+            let quad = [fin(pa), fin(pb), inf(pa), inf(pb)];
+            for tri in [[0, 1, 2], [3, 4, 5]] {
+                let corners = tri.map(|v| quad[side_corner(v, m as i32) as usize]);
+                // A light exactly on A or B extrudes it to (0,0,0,0), which is
+                // no point at all: such a triangle has no area to cross.
+                if usable(&corners) {
+                    sides.push(Emitted {
+                        corners,
+                        weight: m.unsigned_abs() as i32,
+                    });
+                }
+            }
+        }
+    }
+    for (t, &c) in index.tris.iter().zip(&ev.caps) {
+        if c != 0 {
+            let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
+            let corners = [inf(t[2]), inf(p1), inf(p0)];
+            if usable(&corners) {
+                backs.push(Emitted { corners, weight: 1 });
+            }
+        }
+    }
+    let lh = hom(light);
+    // Per-direction data, built on first use (by whichever thread needs it).
+    let back_terms: Vec<OnceLock<Option<i32>>> =
+        (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
+    let grids: Vec<OnceLock<SideGrid>> = (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
+    let outcomes: Vec<(Option<i32>, i32, bool)> = samples
+        .par_iter()
+        .map(|&s| {
+            let p = fin(s);
+            let p3 = [p[0], p[1], p[2]];
+            // Truth: triangles crossed by the open segment P → L (ray to a directional light).
+            let (dir, t_max) = if light[3] == 0.0 {
+                ([lh[0], lh[1], lh[2]], f64::INFINITY)
+            } else {
+                ([lh[0] - p[0], lh[1] - p[1], lh[2] - p[2]], 1.0)
+            };
+            let mut truth = 0i32;
+            let mut ambiguous = false;
+            index.bvh.query(p3, dir, t_max, |i| {
+                match meet(p, lh, index.tris[i as usize].map(fin)) {
+                    Meet::Cross(_) => truth += 1,
+                    Meet::None => {}
+                    Meet::AOnTriangle | Meet::Degenerate => ambiguous = true,
+                }
+            });
+            // Winding: first direction whose ray touches nothing degenerately.
+            let mut winding = None;
+            for (k, dk) in DIRECTIONS.iter().enumerate() {
+                let dh = [dk[0] as f64, dk[1] as f64, dk[2] as f64, 0.0];
+                let Some(back) = *back_terms[k].get_or_init(|| {
+                    // Back caps meet the ray only at its end at infinity, where
+                    // the answer does not depend on P: any finite point will do.
+                    let mut sum = 0;
+                    for e in &backs {
+                        match meet([0.0, 0.0, 0.0, 1.0], dh, e.corners) {
+                            Meet::Cross(sg) => sum += sg * e.weight,
+                            Meet::None => {}
+                            _ => return None,
+                        }
+                    }
+                    Some(sum)
+                }) else {
+                    continue;
+                };
+                let mut w = back;
+                let mut ok = true;
+                let mut on_face = false;
+                let grid = grids[k].get_or_init(|| SideGrid::new(&sides, *dk, samples));
+                for &i in grid.candidates(s) {
+                    let e = &sides[i as usize];
+                    match meet(p, dh, e.corners) {
+                        Meet::Cross(sg) => w += sg * e.weight,
+                        Meet::None => {}
+                        Meet::AOnTriangle => on_face = true,
+                        Meet::Degenerate => ok = false,
+                    }
+                }
+                index
+                    .bvh
+                    .query(p3, [dh[0], dh[1], dh[2]], f64::INFINITY, |i| {
+                        let c = ev.caps[i as usize];
+                        if c == 0 {
+                            return;
+                        }
+                        let t = index.tris[i as usize];
+                        let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
+                        match meet(p, dh, [fin(p0), fin(p1), fin(t[2])]) {
+                            Meet::Cross(sg) => w += sg,
+                            Meet::None => {}
+                            Meet::AOnTriangle => on_face = true,
+                            Meet::Degenerate => ok = false,
+                        }
+                    });
+                if on_face {
+                    ambiguous = true;
+                    break;
+                }
+                if ok {
+                    winding = Some(w);
+                    break;
+                }
+            }
+            (winding, truth, ambiguous)
+        })
+        .collect();
+    let mut rep = ShadowReport::default();
+    for (&s, &(winding, truth, ambiguous)) in samples.iter().zip(&outcomes) {
+        match winding {
+            _ if ambiguous => rep.on_faces += 1,
+            None => rep.on_faces += 1,
+            Some(w) => {
+                rep.samples += 1;
+                if w != truth {
+                    rep.mismatches += 1;
+                    if rep.first_mismatch.is_none() {
+                        rep.first_mismatch = Some(format!(
+                            "sample ({}, {}, {}): volume winding {w}, but {truth} triangles lie between it and the light",
+                            s[0], s[1], s[2]
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    rep
+}
