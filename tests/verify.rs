@@ -214,15 +214,19 @@ fn kim_evaluator_cracks_on_real_models_reference_does_not() {
         .arg("--lights=32")
         .assert()
         .code(0);
-    svpack()
+    let r = svpack()
         .arg("verify")
         .arg(&out)
         .arg("--lights=32")
         .arg("--evaluator=kim")
-        .assert()
-        .code(2)
-        .stdout(predicate::str::contains("closedness violations"))
-        .stdout(predicate::str::contains("FAILED"));
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert!(j["closedness_violations"].as_u64().unwrap() > 0, "{j}");
+    assert!(j["sample_mismatches"].as_u64().unwrap() > 0, "{j}");
+    assert_eq!(j["bijection_errors"], 0);
 }
 
 #[test]
