@@ -167,6 +167,12 @@ fn run_verify(
         if let Some(m) = &rep.first_mismatch {
             println!("first mismatch: {m}");
         }
+        if rep.orientation_errors > 0 {
+            println!(
+                "note: {} triangle orientations differ from the exact ones (f32 precision; lights within rounding distance of triangle planes)",
+                rep.orientation_errors
+            );
+        }
         println!(
             "{}: {} closedness violations, {} sample mismatches ({} samples compared, {} on volume faces) over {} lights ({} failing), {:.1} ms",
             if rep.ok { "OK" } else { "FAILED" },

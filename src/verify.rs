@@ -491,8 +491,30 @@ pub struct LightReport {
     /// Samples whose volume winding number differs from the exact count of
     /// triangles between them and the light.
     pub sample_mismatches: u64,
+    /// Triangles whose f32 orientation (the contract's) differs from the exact
+    /// one: where f32 precision runs out (a light within rounding distance of
+    /// a triangle's plane). Informational: it explains shadow mismatches but
+    /// is not itself a failure, since the volume stays closed.
+    pub orientation_errors: u64,
     /// Wall time for this light in milliseconds.
     pub time_ms: f64,
+}
+
+/// Counts caps whose evaluated orientation differs from the exact orientation
+/// of the triangle towards the light.
+pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
+    let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
+    let l = light.map(|v| v as f64);
+    d.caps
+        .iter()
+        .zip(&ev.caps)
+        .filter(|(t, c)| {
+            let p = t.map(|i| h(d.positions[i as usize]));
+            // det[P0; P1; P2; L] = −N·(L − P0·w): negative when L sees (P0, P1, P2) counter-clockwise.
+            let exact = -crate::exact::det4_sign([p[0], p[1], p[2], l]);
+            exact != **c as i32
+        })
+        .count() as u64
 }
 
 /// Whole verify report (`svpack verify --json`).
@@ -524,6 +546,8 @@ pub struct VerifyReport {
     /// First mismatch, in words.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub first_mismatch: Option<String>,
+    /// Orientation errors (f32 against exact), summed over lights.
+    pub orientation_errors: u64,
     /// Lights with any violation or mismatch.
     pub failing_lights: u64,
     /// Per light (summed over meshes).
@@ -561,6 +585,7 @@ pub fn verify(
         samples_on_faces: 0,
         sample_mismatches: 0,
         first_mismatch: None,
+        orientation_errors: 0,
         failing_lights: 0,
         lights: Vec::new(),
         time_ms: 0.0,
@@ -592,11 +617,13 @@ pub fn verify(
             samples: 0,
             samples_on_faces: 0,
             sample_mismatches: 0,
+            orientation_errors: 0,
             time_ms: 0.0,
         };
         for ((d, index), pts) in decoded.iter().zip(&indexes).zip(&points) {
             let ev = evaluate(d, light, strategy);
             let c = check_closedness(d, light, &ev);
+            lr.orientation_errors += orientation_errors(d, light, &ev);
             if !pts.is_empty() {
                 let sh = crate::shadow::check_shadow(d, index, light, &ev, pts);
                 lr.samples += sh.samples;
@@ -621,6 +648,7 @@ pub fn verify(
         rep.samples += lr.samples;
         rep.samples_on_faces += lr.samples_on_faces;
         rep.sample_mismatches += lr.sample_mismatches;
+        rep.orientation_errors += lr.orientation_errors;
         rep.failing_lights += (lr.closedness_violations > 0 || lr.sample_mismatches > 0) as u64;
         rep.lights.push(lr);
     }

@@ -9,11 +9,7 @@ fn every_shared_model_builds_and_reads_back() {
     let Some(shared) = common::shared_meshes() else {
         return;
     };
-    let mut files = common::files_with_ext(&shared.join("obj"), &["obj"]);
-    files.extend(common::files_with_ext(
-        &shared.join("gltf"),
-        &["gltf", "glb"],
-    ));
+    let files = common::shared_models(&shared);
     assert!(
         files.len() >= 20,
         "expected the shared corpus, found {}",

@@ -23,6 +23,23 @@ fn patch_payload(path: &std::path::Path, f: impl Fn(&mut [u8], &svpack::format::
     std::fs::write(path, bytes).unwrap();
 }
 
+/// Builds fixture `name` into a temp dir and decodes its first mesh.
+fn built_fixture(name: &str) -> (tempfile::TempDir, svpack::verify::Decoded) {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let src = &fx.iter().find(|f| f.0 == name).unwrap().1;
+    let out = tmp.path().join("fixture.svpk");
+    svpack()
+        .arg("build")
+        .arg(src)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+    (tmp, d)
+}
+
 #[test]
 fn fixtures_verify_with_many_lights() {
     let tmp = tempfile::tempdir().unwrap();
@@ -82,19 +99,7 @@ fn bad_light_values_are_usage_errors() {
 
 #[test]
 fn flipped_opposite_sign_and_unswapped_cap_break_closedness() {
-    let tmp = tempfile::tempdir().unwrap();
-    let fx = write_fixtures(tmp.path());
-    let src = &fx.iter().find(|f| f.0 == "two_tets.obj").unwrap().1;
-    let out = tmp.path().join("t.svpk");
-    svpack()
-        .arg("build")
-        .arg(src)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .code(0);
-    let file = svpack::format::read_file(&out).unwrap();
-    let d = decode(&file, 0);
+    let (_tmp, d) = built_fixture("two_tets.obj");
     assert!(check_structure(&d).ok());
     let light = [0.3, 2.0, 0.7, 1.0];
     let good = evaluate(&d, light, Strategy::Reference);
@@ -231,19 +236,7 @@ fn kim_evaluator_cracks_on_real_models_reference_does_not() {
 
 #[test]
 fn samples_on_volume_faces_are_reported_not_compared() {
-    let tmp = tempfile::tempdir().unwrap();
-    let fx = write_fixtures(tmp.path());
-    let src = &fx.iter().find(|f| f.0 == "quad.obj").unwrap().1;
-    let out = tmp.path().join("q.svpk");
-    svpack()
-        .arg("build")
-        .arg(src)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .code(0);
-    let file = svpack::format::read_file(&out).unwrap();
-    let d = decode(&file, 0);
+    let (_tmp, d) = built_fixture("quad.obj");
     let light = [0.5, 0.5, 1.0, 1.0];
     let ev = evaluate(&d, light, Strategy::Reference);
     let index = svpack::shadow::ShadowIndex::new(&d);

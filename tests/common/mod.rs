@@ -20,6 +20,13 @@ pub fn shared_meshes() -> Option<PathBuf> {
     }
 }
 
+/// Every OBJ and glTF model under `shared/obj` and `shared/gltf`.
+pub fn shared_models(shared: &Path) -> Vec<PathBuf> {
+    let mut files = files_with_ext(&shared.join("obj"), &["obj"]);
+    files.extend(files_with_ext(&shared.join("gltf"), &["gltf", "glb"]));
+    files
+}
+
 /// The svpack binary.
 pub fn svpack() -> assert_cmd::Command {
     assert_cmd::Command::cargo_bin("svpack").expect("svpack binary")
