@@ -10,41 +10,9 @@ use std::path::Path;
 use svpack::build::{BuildConfig, build_file};
 use svpack::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
 
-fn sphere_obj(n: usize) -> String {
-    use std::fmt::Write;
-    let mut s = String::new();
-    for j in 0..=n {
-        for i in 0..n {
-            let (th, ph) = (
-                std::f64::consts::PI * j as f64 / n as f64,
-                std::f64::consts::TAU * i as f64 / n as f64,
-            );
-            let _ = writeln!(
-                s,
-                "v {} {} {}",
-                th.sin() * ph.cos(),
-                th.sin() * ph.sin(),
-                th.cos()
-            );
-        }
-    }
-    let id = |i: usize, j: usize| j * n + (i % n) + 1;
-    for j in 0..n {
-        for i in 0..n {
-            let _ = writeln!(
-                s,
-                "f {} {} {}\nf {} {} {}",
-                id(i, j),
-                id(i, j + 1),
-                id(i + 1, j + 1),
-                id(i, j),
-                id(i + 1, j + 1),
-                id(i + 1, j)
-            );
-        }
-    }
-    s
-}
+#[path = "../examples/sphere.rs"]
+mod sphere;
+use sphere::sphere_obj;
 
 fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     let dir = tempfile::tempdir().unwrap();
