@@ -261,3 +261,57 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
 pub fn generator() -> String {
     format!("svpack {}", env!("CARGO_PKG_VERSION"))
 }
+
+/// Output path of each input in a batch build: `OUTDIR/<input stem>.svpk`.
+/// Two inputs with the same stem would overwrite each other, so that is an
+/// error naming both (nothing is built).
+pub fn batch_outputs(
+    inputs: &[std::path::PathBuf],
+    outdir: &Path,
+) -> Result<Vec<std::path::PathBuf>> {
+    let mut seen: std::collections::HashMap<std::ffi::OsString, &Path> =
+        std::collections::HashMap::new();
+    let mut out = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        let stem = input
+            .file_stem()
+            .ok_or_else(|| Error::input(input, "input has no file name"))?;
+        if let Some(prev) = seen.insert(stem.to_os_string(), input) {
+            return Err(Error::Other(format!(
+                "inputs {} and {} would both write {}",
+                prev.display(),
+                input.display(),
+                outdir.join(stem).with_extension("svpk").display()
+            )));
+        }
+        let mut name = stem.to_os_string();
+        name.push(".svpk");
+        out.push(outdir.join(name));
+    }
+    Ok(out)
+}
+
+/// Builds every input into its output with up to `jobs` threads (0: all
+/// cores). Each build is independent and single-threaded, so every output is
+/// byte-identical whatever `jobs` is. Results come back in input order; a
+/// failing input does not stop the others.
+pub fn build_batch(
+    inputs: &[std::path::PathBuf],
+    outputs: &[std::path::PathBuf],
+    cfg: &BuildConfig,
+    jobs: usize,
+) -> Vec<Result<BuildOutput>> {
+    use rayon::prelude::*;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build();
+    let run = || {
+        inputs
+            .par_iter()
+            .zip(outputs)
+            .map(|(i, o)| build_file(i, o, cfg))
+            .collect()
+    };
+    match pool {
+        Ok(pool) => pool.install(run),
+        Err(_) => run(),
+    }
+}

@@ -5,7 +5,7 @@
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use svpack::build::{BuildConfig, build_file};
+use svpack::build::BuildConfig;
 use svpack::layout::{DEFAULT_MAX_MULT, MAX_MAX_MULT};
 use svpack::report::Summary;
 
@@ -19,13 +19,23 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Build a .svpk file from a glTF 2.0 (.gltf/.glb) or OBJ file.
+    /// Build .svpk files from glTF 2.0 (.gltf/.glb) or OBJ files.
+    ///
+    /// One input: OUTPUT is the file to write (or a directory). Several
+    /// inputs: OUTPUT is a directory (created if missing) and each input
+    /// writes OUTPUT/<input stem>.svpk; failing inputs are reported at the
+    /// end and the others are still built.
     Build {
-        /// Input .gltf, .glb or .obj file.
-        input: PathBuf,
-        /// Output .svpk file (written atomically).
+        /// Input .gltf, .glb or .obj files.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Output .svpk file, or directory for several inputs (written atomically).
         #[arg(short, long)]
         output: PathBuf,
+        /// Inputs built in parallel (0: one per core). Outputs are identical
+        /// whatever the value.
+        #[arg(long, default_value_t = 0)]
+        jobs: usize,
         /// K: most opposite vertices per side instance; edges with more are
         /// split. The sides shader needs 3 + K vertex attributes; the default 5
         /// fits the 8 every WebGL 1 device has.
@@ -208,26 +218,83 @@ enum Outcome {
 fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
     match cli.command {
         Command::Build {
-            input,
+            inputs,
             output,
+            jobs,
             max_mult,
             compress,
             json,
             verify,
             lights,
         } => {
-            let out = build_file(&input, &output, &BuildConfig { max_mult, compress })?;
-            for w in &out.warnings {
-                eprintln!("warning: {}: {w}", input.display());
+            let cfg = BuildConfig { max_mult, compress };
+            let batch = inputs.len() > 1 || output.is_dir();
+            let outputs = if batch {
+                std::fs::create_dir_all(&output)
+                    .map_err(|e| svpack::error::Error::io(&output, e))?;
+                svpack::build::batch_outputs(&inputs, &output)?
+            } else {
+                vec![output.clone()]
+            };
+            let results = svpack::build::build_batch(&inputs, &outputs, &cfg, jobs);
+            let mut failures = Vec::new();
+            let mut json_items = Vec::new();
+            let mut verify_failed = false;
+            for ((input, output), result) in inputs.iter().zip(&outputs).zip(results) {
+                match result {
+                    Ok(out) => {
+                        for w in &out.warnings {
+                            eprintln!("warning: {}: {w}", input.display());
+                        }
+                        let mut s = Summary::from_header(&out.header, out.file_bytes, compress);
+                        s.time_ms = Some(out.elapsed.as_secs_f64() * 1e3);
+                        s.warnings = out.warnings;
+                        if json && batch {
+                            json_items.push(serde_json::json!({
+                                "input": input, "output": output, "ok": true, "summary": s
+                            }));
+                        } else {
+                            if !json {
+                                println!("{} -> {}", input.display(), output.display());
+                            }
+                            print_summary(&s, json);
+                        }
+                        if verify && !run_verify(output, &lights, json && !batch)? {
+                            verify_failed = true;
+                        }
+                    }
+                    Err(e) => {
+                        if !batch {
+                            return Err(e);
+                        }
+                        eprintln!("error: {e}");
+                        if json {
+                            json_items.push(serde_json::json!({
+                                "input": input, "output": output, "ok": false, "error": e.to_string()
+                            }));
+                        }
+                        failures.push(e.to_string());
+                    }
+                }
             }
-            let mut s = Summary::from_header(&out.header, out.file_bytes, compress);
-            s.time_ms = Some(out.elapsed.as_secs_f64() * 1e3);
-            s.warnings = out.warnings;
-            if !json {
-                println!("{} -> {}", input.display(), output.display());
+            if json && batch {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&json_items).expect("serialises")
+                );
             }
-            print_summary(&s, json);
-            if verify && !run_verify(&output, &lights, json)? {
+            if !failures.is_empty() {
+                eprintln!("{} of {} inputs failed:", failures.len(), inputs.len());
+                for f in &failures {
+                    eprintln!("  {f}");
+                }
+                return Err(svpack::error::Error::Other(format!(
+                    "{} of {} inputs failed",
+                    failures.len(),
+                    inputs.len()
+                )));
+            }
+            if verify_failed {
                 return Ok(Outcome::ValidationFailed);
             }
         }

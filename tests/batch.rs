@@ -1,0 +1,92 @@
+//! Batch builds: one output per input, failures reported at the end,
+//! outputs identical whatever --jobs is.
+
+mod common;
+
+use common::{svpack, write_fixtures};
+use predicates::prelude::*;
+
+#[test]
+fn batch_outputs_are_identical_for_any_job_count() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let inputs: Vec<_> = fx.iter().map(|f| f.1.clone()).collect();
+    let mut dirs = Vec::new();
+    for jobs in ["1", "2", "0"] {
+        let out = tmp.path().join(format!("out{jobs}"));
+        svpack()
+            .arg("build")
+            .args(&inputs)
+            .arg("-o")
+            .arg(&out)
+            .arg(format!("--jobs={jobs}"))
+            .assert()
+            .code(0);
+        dirs.push(out);
+    }
+    for (name, _) in &fx {
+        let stem = std::path::Path::new(name).file_stem().unwrap().to_str().unwrap();
+        let a = std::fs::read(dirs[0].join(format!("{stem}.svpk"))).unwrap();
+        for d in &dirs[1..] {
+            assert_eq!(a, std::fs::read(d.join(format!("{stem}.svpk"))).unwrap(), "{name}");
+        }
+        // Same bytes as a single build.
+        let single = tmp.path().join("single.svpk");
+        let src = &fx.iter().find(|f| &f.0 == name).unwrap().1;
+        svpack().arg("build").arg(src).arg("-o").arg(&single).assert().code(0);
+        assert_eq!(a, std::fs::read(&single).unwrap(), "{name}");
+    }
+}
+
+#[test]
+fn failing_inputs_are_reported_and_the_rest_built() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let bad = tmp.path().join("broken.obj");
+    std::fs::write(&bad, "v 0 0 0\nf 1 2 3\n").unwrap();
+    let missing = tmp.path().join("missing.glb");
+    let out = tmp.path().join("out");
+    let r = svpack()
+        .arg("build")
+        .arg(&fx[0].1)
+        .arg(&bad)
+        .arg(&fx[1].1)
+        .arg(&missing)
+        .arg("-o")
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(stderr.contains("2 of 4 inputs failed"), "{stderr}");
+    assert!(stderr.contains("broken.obj") && stderr.contains("missing.glb"), "{stderr}");
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let oks: Vec<bool> = j.as_array().unwrap().iter().map(|x| x["ok"].as_bool().unwrap()).collect();
+    assert_eq!(oks, vec![true, false, true, false]);
+    assert!(j[0]["summary"]["triangles"].as_u64().unwrap() > 0);
+    assert!(out.join("cube.svpk").exists() && out.join("seamed_cube.svpk").exists());
+    assert!(!out.join("broken.svpk").exists() && !out.join("missing.svpk").exists());
+}
+
+#[test]
+fn colliding_output_names_are_refused_before_building() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = tmp.path().join("a");
+    let b = tmp.path().join("b");
+    std::fs::create_dir_all(&a).unwrap();
+    std::fs::create_dir_all(&b).unwrap();
+    write_fixtures(&a);
+    write_fixtures(&b);
+    let out = tmp.path().join("out");
+    svpack()
+        .arg("build")
+        .arg(a.join("cube.obj"))
+        .arg(b.join("cube.obj"))
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(1)
+        .stderr(predicate::str::contains("would both write"));
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0);
+}
