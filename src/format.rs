@@ -554,3 +554,14 @@ fn validate_layout(
     }
     Ok(())
 }
+
+/// Bytes the file takes as one zstd frame at [`ZSTD_LEVEL`] (its size on disk
+/// if it already is one).
+pub fn zstd_size(file: &SvpkFile) -> u64 {
+    if file.compressed {
+        return file.file_bytes;
+    }
+    zstd::bulk::compress(&file.bytes, ZSTD_LEVEL)
+        .map(|c| c.len() as u64)
+        .unwrap_or(file.file_bytes)
+}

@@ -62,6 +62,14 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Summarise every .svpk file under a directory as one table, largest first.
+    Report {
+        /// Directory searched recursively for .svpk files.
+        dir: PathBuf,
+        /// Print a JSON array of {file, summary | error} instead.
+        #[arg(long)]
+        json: bool,
+    },
     /// Replay a .svpk file on the CPU: check the sides/caps bijection and,
     /// per light, that the emitted shadow volume is closed. Exit 2 on failure.
     Verify {
@@ -300,7 +308,8 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
         }
         Command::Inspect { file, json } => {
             let f = svpack::format::read_file(&file)?;
-            let s = Summary::from_header(&f.header, f.file_bytes, f.compressed);
+            let mut s = Summary::from_header(&f.header, f.file_bytes, f.compressed);
+            s.zstd_bytes = Some(svpack::format::zstd_size(&f));
             if !json {
                 println!(
                     "{}: svpk {}.{}, written by {}",
@@ -311,6 +320,29 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                 );
             }
             print_summary(&s, json);
+        }
+        Command::Report { dir, json } => {
+            let rows = svpack::report::summarize_dir(&dir)?;
+            if json {
+                let items: Vec<serde_json::Value> = rows
+                    .iter()
+                    .map(|(p, r)| match r {
+                        Ok(s) => serde_json::json!({ "file": p, "summary": s }),
+                        Err(e) => serde_json::json!({ "file": p, "error": e.to_string() }),
+                    })
+                    .collect();
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&items).expect("serialises")
+                );
+            } else {
+                print!("{}", svpack::report::report_table(&rows));
+            }
+            if rows.iter().any(|r| r.1.is_err()) {
+                return Err(svpack::error::Error::Other(
+                    "some files could not be read".into(),
+                ));
+            }
         }
         Command::Verify { file, json, lights } => {
             if !run_verify(&file, &lights, json)? {

@@ -19,6 +19,27 @@ pub struct BucketSummary {
     pub bytes: u64,
 }
 
+/// Per-mesh sizes.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MeshSummary {
+    /// Mesh name.
+    pub name: String,
+    /// Triangles.
+    pub triangles: u64,
+    /// Caps section bytes.
+    pub caps_bytes: u64,
+    /// Sides bytes (all buckets).
+    pub sides_bytes: u64,
+    /// Side buckets.
+    pub buckets: Vec<BucketSummary>,
+}
+
+/// GPU memory of Partitioned Shadow Volumes (Gerhards et al. 2015, §4.1) for
+/// `triangles`: a TOP tree of 4 nodes of 32 bytes per triangle, plus the root.
+pub fn psv_bytes(triangles: u64) -> u64 {
+    4 * 32 * (triangles + 1)
+}
+
 /// Everything `build --json` and `inspect --json` print (stable field names).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Summary {
@@ -53,6 +74,15 @@ pub struct Summary {
     pub file_bytes: u64,
     /// The paper's uniform layout: 16·(2+maxMult)·e + 48·t, maxMult = max_fan.
     pub paper_bytes: u64,
+    /// Partitioned Shadow Volumes' GPU footprint for the same triangles:
+    /// 128·(t + 1) bytes.
+    pub psv_bytes: u64,
+    /// Size of the container as one zstd frame at `--compress`'s level
+    /// (inspect and report only; equals `file_bytes` for compressed files).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zstd_bytes: Option<u64>,
+    /// Per mesh.
+    pub meshes: Vec<MeshSummary>,
     /// Lower bounds.
     pub bounds_min: [f32; 3],
     /// Upper bounds.
@@ -114,6 +144,27 @@ impl Summary {
             container_bytes: h.payload_offset + h.payload_len,
             file_bytes,
             paper_bytes: paper_bytes(stats.edges, stats.triangles, stats.max_fan),
+            psv_bytes: psv_bytes(stats.triangles),
+            zstd_bytes: None,
+            meshes: h
+                .meshes
+                .iter()
+                .map(|m| MeshSummary {
+                    name: m.name.clone(),
+                    triangles: m.stats.triangles,
+                    caps_bytes: m.caps.length,
+                    sides_bytes: m.buckets.iter().map(|b| b.length).sum(),
+                    buckets: m
+                        .buckets
+                        .iter()
+                        .map(|b| BucketSummary {
+                            k: b.k,
+                            instances: b.instances,
+                            bytes: b.length,
+                        })
+                        .collect(),
+                })
+                .collect(),
             bounds_min: h.bounds_min,
             bounds_max: h.bounds_max,
             time_ms: None,
@@ -216,6 +267,16 @@ impl Summary {
             human_bytes(self.paper_bytes),
             pct(self.sides_bytes + self.caps_bytes, self.paper_bytes)
         );
+        let _ = write!(
+            o,
+            "\ncompare: input file {} (output is {:.0}% of it); Partitioned Shadow Volumes would need {} of GPU memory",
+            human_bytes(self.input_bytes),
+            pct(self.file_bytes, self.input_bytes),
+            human_bytes(self.psv_bytes)
+        );
+        if let Some(z) = self.zstd_bytes {
+            let _ = write!(o, "; zstd-compressed {}", human_bytes(z));
+        }
         o.push('\n');
         o
     }
@@ -235,4 +296,88 @@ pub fn human_bytes(b: u64) -> String {
     } else {
         format!("{v:.2} {}", UNITS[u])
     }
+}
+
+/// Summaries of every `.svpk` file under `dir` (recursively), largest file
+/// first (ties by path), each with the file's path; unreadable files carry
+/// their error.
+pub fn summarize_dir(
+    dir: &std::path::Path,
+) -> crate::error::Result<Vec<(std::path::PathBuf, crate::error::Result<Summary>)>> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let entries = std::fs::read_dir(&d).map_err(|e| crate::error::Error::io(&d, e))?;
+        for e in entries {
+            let p = e.map_err(|e| crate::error::Error::io(&d, e))?.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p
+                .extension()
+                .is_some_and(|x| x.eq_ignore_ascii_case("svpk"))
+            {
+                files.push(p);
+            }
+        }
+    }
+    let mut out: Vec<(std::path::PathBuf, crate::error::Result<Summary>)> = files
+        .into_iter()
+        .map(|p| {
+            let s = crate::format::read_file(&p)
+                .map(|f| Summary::from_header(&f.header, f.file_bytes, f.compressed));
+            (p, s)
+        })
+        .collect();
+    let size = |r: &crate::error::Result<Summary>| r.as_ref().map(|s| s.file_bytes).unwrap_or(0);
+    out.sort_by(|a, b| size(&b.1).cmp(&size(&a.1)).then_with(|| a.0.cmp(&b.0)));
+    Ok(out)
+}
+
+/// The `svpack report` table: one line per file, largest first, and a total.
+pub fn report_table(rows: &[(std::path::PathBuf, crate::error::Result<Summary>)]) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "{:>10} {:>10} {:>10} {:>10} {:>10} {:>8} {:>8}  file",
+        "bytes", "triangles", "edges", "sides", "caps", "%paper", "%psv"
+    );
+    let (mut bytes, mut tris) = (0u64, 0u64);
+    for (p, r) in rows {
+        match r {
+            Ok(s) => {
+                bytes += s.file_bytes;
+                tris += s.stats.triangles;
+                let pct = |a: u64, b: u64| {
+                    if b == 0 {
+                        0.0
+                    } else {
+                        100.0 * a as f64 / b as f64
+                    }
+                };
+                let _ = writeln!(
+                    o,
+                    "{:>10} {:>10} {:>10} {:>10} {:>10} {:>7.1}% {:>7.1}%  {}",
+                    human_bytes(s.file_bytes),
+                    s.stats.triangles,
+                    s.stats.edges,
+                    human_bytes(s.sides_bytes),
+                    human_bytes(s.caps_bytes),
+                    pct(s.sides_bytes + s.caps_bytes, s.paper_bytes),
+                    pct(s.file_bytes, s.psv_bytes),
+                    p.display()
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(o, "{:>10} {e}", "error");
+            }
+        }
+    }
+    let _ = writeln!(
+        o,
+        "{:>10} {:>10}  total of {} files",
+        human_bytes(bytes),
+        tris,
+        rows.len()
+    );
+    o
 }

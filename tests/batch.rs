@@ -25,15 +25,29 @@ fn batch_outputs_are_identical_for_any_job_count() {
         dirs.push(out);
     }
     for (name, _) in &fx {
-        let stem = std::path::Path::new(name).file_stem().unwrap().to_str().unwrap();
+        let stem = std::path::Path::new(name)
+            .file_stem()
+            .unwrap()
+            .to_str()
+            .unwrap();
         let a = std::fs::read(dirs[0].join(format!("{stem}.svpk"))).unwrap();
         for d in &dirs[1..] {
-            assert_eq!(a, std::fs::read(d.join(format!("{stem}.svpk"))).unwrap(), "{name}");
+            assert_eq!(
+                a,
+                std::fs::read(d.join(format!("{stem}.svpk"))).unwrap(),
+                "{name}"
+            );
         }
         // Same bytes as a single build.
         let single = tmp.path().join("single.svpk");
         let src = &fx.iter().find(|f| &f.0 == name).unwrap().1;
-        svpack().arg("build").arg(src).arg("-o").arg(&single).assert().code(0);
+        svpack()
+            .arg("build")
+            .arg(src)
+            .arg("-o")
+            .arg(&single)
+            .assert()
+            .code(0);
         assert_eq!(a, std::fs::read(&single).unwrap(), "{name}");
     }
 }
@@ -60,9 +74,17 @@ fn failing_inputs_are_reported_and_the_rest_built() {
     assert_eq!(r.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(stderr.contains("2 of 4 inputs failed"), "{stderr}");
-    assert!(stderr.contains("broken.obj") && stderr.contains("missing.glb"), "{stderr}");
+    assert!(
+        stderr.contains("broken.obj") && stderr.contains("missing.glb"),
+        "{stderr}"
+    );
     let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
-    let oks: Vec<bool> = j.as_array().unwrap().iter().map(|x| x["ok"].as_bool().unwrap()).collect();
+    let oks: Vec<bool> = j
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x["ok"].as_bool().unwrap())
+        .collect();
     assert_eq!(oks, vec![true, false, true, false]);
     assert!(j[0]["summary"]["triangles"].as_u64().unwrap() > 0);
     assert!(out.join("cube.svpk").exists() && out.join("seamed_cube.svpk").exists());
@@ -89,4 +111,91 @@ fn colliding_output_names_are_refused_before_building() {
         .code(1)
         .stderr(predicate::str::contains("would both write"));
     assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0);
+}
+
+#[test]
+fn report_lists_files_largest_first_with_size_comparisons() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let out = tmp.path().join("out");
+    let inputs: Vec<_> = fx.iter().map(|f| f.1.clone()).collect();
+    svpack()
+        .arg("build")
+        .args(&inputs)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    let r = svpack()
+        .arg("report")
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(0));
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let rows = j.as_array().unwrap();
+    assert_eq!(rows.len(), fx.len());
+    let sizes: Vec<u64> = rows
+        .iter()
+        .map(|x| x["summary"]["file_bytes"].as_u64().unwrap())
+        .collect();
+    assert!(
+        sizes.windows(2).all(|w| w[0] >= w[1]),
+        "not largest first: {sizes:?}"
+    );
+    for x in rows {
+        let s = &x["summary"];
+        let t = s["triangles"].as_u64().unwrap();
+        assert_eq!(s["psv_bytes"].as_u64().unwrap(), 128 * (t + 1));
+        let per_mesh: u64 = s["meshes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| m["sides_bytes"].as_u64().unwrap())
+            .sum();
+        assert_eq!(per_mesh, s["sides_bytes"].as_u64().unwrap());
+    }
+    // inspect adds the zstd size; for an already compressed file it is the file size.
+    let cube = out.join("cube.svpk");
+    let j: serde_json::Value = serde_json::from_slice(
+        &svpack()
+            .arg("inspect")
+            .arg(&cube)
+            .arg("--json")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    assert!(j["zstd_bytes"].as_u64().unwrap() < j["file_bytes"].as_u64().unwrap());
+    let z = tmp.path().join("z.svpk");
+    svpack()
+        .arg("build")
+        .arg(&fx[0].1)
+        .arg("-o")
+        .arg(&z)
+        .arg("--compress")
+        .assert()
+        .code(0);
+    let j: serde_json::Value = serde_json::from_slice(
+        &svpack()
+            .arg("inspect")
+            .arg(&z)
+            .arg("--json")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap();
+    assert_eq!(j["zstd_bytes"], j["file_bytes"]);
+    // A damaged file is listed with its error and makes the exit code 1.
+    std::fs::write(out.join("junk.svpk"), b"not a file").unwrap();
+    svpack()
+        .arg("report")
+        .arg(&out)
+        .assert()
+        .code(1)
+        .stdout(predicate::str::contains("junk.svpk"))
+        .stdout(predicate::str::contains("total of 8 files"));
 }
