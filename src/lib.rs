@@ -7,6 +7,7 @@ pub mod evaluate;
 pub mod exact;
 pub mod format;
 pub mod layout;
+pub mod lint;
 pub mod load;
 pub mod multiplicity;
 pub mod report;

@@ -1,6 +1,7 @@
 //! `svpack` command line: parses options, calls the library, prints.
 //!
-//! Exit codes: 0 success, 1 input or usage error, 2 validation failure.
+//! Exit codes: 0 success, 1 input or usage error, 2 validation failure,
+//! 3 lint found a denied problem.
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -61,6 +62,24 @@ enum Command {
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
+    },
+    /// Check assets for problems that matter to shadow geometry (codes in
+    /// README). Exit 3 when a denied finding is present; error-severity
+    /// findings are always denied.
+    Lint {
+        /// Input .gltf, .glb or .obj files.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Print findings as JSON (an array of {file, findings | error}).
+        #[arg(long)]
+        json: bool,
+        /// Deny `warnings` (every warning) or the given codes; repeatable.
+        #[arg(long, value_name = "warnings|CODE")]
+        deny: Vec<String>,
+        /// K used to predict which edges `build` will split.
+        #[arg(long, default_value_t = DEFAULT_MAX_MULT,
+              value_parser = clap::value_parser!(u32).range(1..=MAX_MAX_MULT as i64))]
+        max_mult: u32,
     },
     /// Summarise every .svpk file under a directory as one table, largest first.
     Report {
@@ -221,6 +240,99 @@ fn print_summary(s: &Summary, json: bool) {
 enum Outcome {
     Ok,
     ValidationFailed,
+    LintDenied,
+}
+
+/// Runs lint on every input and prints; returns whether a denied finding was found.
+fn run_lint(
+    inputs: &[PathBuf],
+    json: bool,
+    deny: &[String],
+    max_mult: u32,
+) -> Result<Outcome, svpack::error::Error> {
+    use svpack::lint::{CODES, Severity};
+    for d in deny {
+        if d != "warnings" && !CODES.iter().any(|c| c.0 == d) {
+            let known: Vec<&str> = CODES.iter().map(|c| c.0).collect();
+            return Err(svpack::error::Error::Other(format!(
+                "--deny {d}: unknown code (use `warnings` or one of: {})",
+                known.join(", ")
+            )));
+        }
+    }
+    let denied = |f: &svpack::lint::Finding| {
+        f.severity == Severity::Error
+            || (f.severity == Severity::Warning && deny.iter().any(|d| d == "warnings"))
+            || deny.iter().any(|d| d == f.code)
+    };
+    let mut any_denied = false;
+    let mut failures = 0;
+    let mut items = Vec::new();
+    if !json {
+        println!(
+            "{:<8} {:<22} {:>9}  {:<24} message (first example)",
+            "severity", "code", "count", "file"
+        );
+    }
+    for input in inputs {
+        match svpack::lint::lint_file(input, max_mult) {
+            Ok(findings) => {
+                any_denied |= findings.iter().any(denied);
+                if json {
+                    items.push(serde_json::json!({ "file": input, "findings": findings }));
+                } else {
+                    for f in &findings {
+                        let example = f
+                            .examples
+                            .first()
+                            .map(|e| {
+                                format!(
+                                    " (triangle {} in {}, {:?})",
+                                    e.triangle, e.part, e.positions
+                                )
+                            })
+                            .unwrap_or_default();
+                        println!(
+                            "{:<8} {:<22} {:>9}  {:<24} {}{example}{}",
+                            format!("{:?}", f.severity).to_lowercase(),
+                            f.code,
+                            f.count,
+                            input
+                                .file_name()
+                                .map(|n| n.to_string_lossy().into_owned())
+                                .unwrap_or_default(),
+                            f.message,
+                            if denied(f) { "  [denied]" } else { "" }
+                        );
+                    }
+                }
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                failures += 1;
+                if json {
+                    items.push(serde_json::json!({ "file": input, "error": e.to_string() }));
+                }
+            }
+        }
+    }
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&items).expect("serialises")
+        );
+    }
+    if failures > 0 {
+        return Err(svpack::error::Error::Other(format!(
+            "{failures} of {} inputs could not be read",
+            inputs.len()
+        )));
+    }
+    Ok(if any_denied {
+        Outcome::LintDenied
+    } else {
+        Outcome::Ok
+    })
 }
 
 fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
@@ -321,6 +433,12 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             }
             print_summary(&s, json);
         }
+        Command::Lint {
+            inputs,
+            json,
+            deny,
+            max_mult,
+        } => return run_lint(&inputs, json, &deny, max_mult),
         Command::Report { dir, json } => {
             let rows = svpack::report::summarize_dir(&dir)?;
             if json {
@@ -370,6 +488,7 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,
         Ok(Outcome::ValidationFailed) => ExitCode::from(2),
+        Ok(Outcome::LintDenied) => ExitCode::from(3),
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(1)
