@@ -103,3 +103,15 @@ fn json_lists_findings_per_file() {
     assert_eq!(findings[0]["severity"], "warning");
     assert!(findings[0]["examples"][0]["positions"].is_array());
 }
+
+#[test]
+fn readme_documents_every_code() {
+    let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
+    for (code, severity, _) in svpack::lint::CODES {
+        let sev = format!("{severity:?}").to_lowercase();
+        assert!(
+            readme.contains(&format!("| `{code}` | {sev} |")),
+            "README lint table lacks `{code}` ({sev})"
+        );
+    }
+}
