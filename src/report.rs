@@ -175,13 +175,6 @@ impl Summary {
     /// Compact human-readable summary (gltfpack style), several lines.
     pub fn to_text(&self) -> String {
         let mut o = String::new();
-        let pct = |a: u64, b: u64| {
-            if b == 0 {
-                0.0
-            } else {
-                100.0 * a as f64 / b as f64
-            }
-        };
         let _ = writeln!(
             o,
             "input:   {} ({}, {}): {} triangles, {} vertices, {} primitives",
@@ -282,6 +275,15 @@ impl Summary {
     }
 }
 
+/// `a` as a percentage of `b` (0 when `b` is 0).
+fn pct(a: u64, b: u64) -> f64 {
+    if b == 0 {
+        0.0
+    } else {
+        100.0 * a as f64 / b as f64
+    }
+}
+
 /// `1234567` → `"1.18 MiB"`.
 pub fn human_bytes(b: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
@@ -347,13 +349,6 @@ pub fn report_table(rows: &[(std::path::PathBuf, crate::error::Result<Summary>)]
             Ok(s) => {
                 bytes += s.file_bytes;
                 tris += s.stats.triangles;
-                let pct = |a: u64, b: u64| {
-                    if b == 0 {
-                        0.0
-                    } else {
-                        100.0 * a as f64 / b as f64
-                    }
-                };
                 let _ = writeln!(
                     o,
                     "{:>10} {:>10} {:>10} {:>10} {:>10} {:>7.1}% {:>7.1}%  {}",
