@@ -598,9 +598,10 @@ pub fn verify(
             rep.first_problem = s.first_problem;
         }
     }
-    let indexes: Vec<crate::shadow::ShadowIndex> = decoded
+    // The shadow-truth index is only needed when samples are asked for.
+    let indexes: Vec<Option<crate::shadow::ShadowIndex>> = decoded
         .iter()
-        .map(crate::shadow::ShadowIndex::new)
+        .map(|d| (samples > 0).then(|| crate::shadow::ShadowIndex::new(d)))
         .collect();
     let points: Vec<Vec<[f32; 3]>> = decoded
         .iter()
@@ -624,7 +625,7 @@ pub fn verify(
             let ev = evaluate(d, light, strategy);
             let c = check_closedness(d, light, &ev);
             lr.orientation_errors += orientation_errors(d, light, &ev);
-            if !pts.is_empty() {
+            if let Some(index) = index {
                 let sh = crate::shadow::check_shadow(d, index, light, &ev, pts);
                 lr.samples += sh.samples;
                 lr.samples_on_faces += sh.on_faces;
