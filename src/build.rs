@@ -2,11 +2,12 @@
 
 use crate::error::{Error, Result};
 use crate::format::{
-    self, BucketHeader, BuildOptions, Header, HistogramEntry, InputInfo, MeshHeader, MeshPayload,
-    MeshStats, Section,
+    self, BucketHeader, BuildOptions, Encoding, Header, HistogramEntry, InputInfo, MeshHeader,
+    MeshPayload, MeshStats, Section,
 };
 use crate::layout::{self, Layout, MAX_MAX_MULT};
 use crate::load::{self, Soup};
+use crate::quantize::{self, RecordSpace};
 use crate::topology::{self, Edges};
 use crate::weld::{self, Welded};
 use std::path::Path;
@@ -19,6 +20,8 @@ pub struct BuildConfig {
     pub max_mult: u32,
     /// Wrap the output in a zstd frame.
     pub compress: bool,
+    /// How positions are stored (f32, or 16-bit quantised over the mesh bounds).
+    pub positions: Encoding,
 }
 
 impl Default for BuildConfig {
@@ -26,6 +29,7 @@ impl Default for BuildConfig {
         BuildConfig {
             max_mult: layout::DEFAULT_MAX_MULT,
             compress: false,
+            positions: Encoding::F32,
         }
     }
 }
@@ -172,11 +176,23 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
     let start = Instant::now();
     let data = load::read_file(input)?;
     let fmt = load::detect_format(input, &data)?;
-    let soup = match fmt {
+    let mut soup = match fmt {
         load::Format::Gltf => load::gltf::load_gltf(input, data)?,
         load::Format::Obj => load::obj::load_obj(input, data)?,
     };
     check_soup(input, &soup)?;
+    // Quantising comes before welding (see `quantize`): positions that share a
+    // code weld together and collapsed triangles count as degenerate.
+    let (space, world_bounds) = match cfg.positions {
+        Encoding::F32 => (RecordSpace::IDENTITY, None),
+        Encoding::Unorm16 => {
+            let (lo, hi) = quantize::used_bounds(&soup.positions, &soup.indices);
+            (RecordSpace::unorm16_box(lo, hi), Some((lo, hi)))
+        }
+    };
+    if cfg.positions != Encoding::F32 {
+        soup.positions = quantize::to_record_space(&soup.positions, &space, cfg.positions);
+    }
     let built = build_soup(&soup, cfg.max_mult);
     if built.stats.triangles == 0 {
         return Err(Error::input(
@@ -190,7 +206,7 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
             ),
         ));
     }
-    let (bmin, bmax) = bounds(&built.welded.positions);
+    let (bmin, bmax) = world_bounds.unwrap_or_else(|| bounds(&built.welded.positions));
     let name = input
         .file_stem()
         .map(|n| n.to_string_lossy().into_owned())
@@ -200,6 +216,8 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
             name,
             bounds_min: bmin,
             bounds_max: bmax,
+            position_offset: space.offset,
+            position_scale: space.scale,
             stats: built.stats.clone(),
             caps: Section {
                 offset: 0,
@@ -243,6 +261,7 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
         options: BuildOptions {
             max_mult: cfg.max_mult,
             compress: cfg.compress,
+            positions: cfg.positions.code(),
         },
         bounds_min: bmin,
         bounds_max: bmax,

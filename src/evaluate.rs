@@ -6,19 +6,126 @@
 //! the float contract in [`crate::multiplicity`]. Work is split over records
 //! with rayon; results do not depend on the thread count.
 
-use crate::multiplicity::{Light, tri_sign};
+use crate::multiplicity::{Light, sort3, tri_sign};
 
-/// How multiplicities and cap orientations are computed.
+/// How multiplicities and cap orientations are computed. Only
+/// [`Strategy::Reference`] is the format's contract (what the shaders do);
+/// the others are peers for `svpack verify --evaluator` and
+/// `svpack bench --accuracy`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Strategy {
-    /// The format's contract: reference edge in f32 (format-spec/multiplicity.md).
+    /// (a) Kim et al. 2008: one light plane per edge, opposite vertices tested
+    /// against it; caps oriented by their own plane. Three different float
+    /// expressions per triangle, so it can crack.
+    Kim,
+    /// (b) Pečiva et al. 2013 (thesis ch. 4): every occurrence of a triangle
+    /// evaluates Kim's light-plane test for all three of its edges, in one
+    /// fixed corner order (lexicographic), and discards the triangle (sign 0)
+    /// when the three disagree. Consistent, three plane tests per triangle.
+    Peciva,
+    /// (c) The format's contract: reference edge in f32 (format-spec/multiplicity.md).
     #[default]
     Reference,
-    /// Kim et al. 2008: one light plane per edge, opposite vertices tested
-    /// against it; caps oriented by their own plane. Three different float
-    /// expressions per triangle, so it can crack (kept as a peer and to show
-    /// that verify catches it).
-    Kim,
+    /// (d) The reference edge evaluated in f64 on the same sorted corners.
+    ReferenceF64,
+    /// (e) Exact orientation: the sign of the 4×4 determinant of the
+    /// homogeneous corners and light ([`crate::exact::det4_sign`]).
+    Exact,
+}
+
+impl Strategy {
+    /// Every strategy, in the order (a)–(e).
+    pub const ALL: [Strategy; 5] = [
+        Strategy::Kim,
+        Strategy::Peciva,
+        Strategy::Reference,
+        Strategy::ReferenceF64,
+        Strategy::Exact,
+    ];
+
+    /// Short name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::Kim => "kim",
+            Strategy::Peciva => "peciva",
+            Strategy::Reference => "reference",
+            Strategy::ReferenceF64 => "reference-f64",
+            Strategy::Exact => "exact",
+        }
+    }
+
+    /// Side contribution of opposite vertex `o` to edge `a → b` (`a < b`).
+    #[inline(always)]
+    pub fn side_sign(self, a: [f32; 3], b: [f32; 3], o: [f32; 3], l: Light) -> i32 {
+        match self {
+            Strategy::Kim => kim_sign(a, b, o, l),
+            Strategy::Peciva => peciva_sign(a, b, o, l),
+            Strategy::Reference => tri_sign(a, b, o, l),
+            Strategy::ReferenceF64 => tri_sign_f64(a, b, o, l),
+            Strategy::Exact => exact_sign(a, b, o, l),
+        }
+    }
+
+    /// Orientation of the cap `(p0, p1, p2)`.
+    #[inline(always)]
+    pub fn cap_sign(self, p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
+        match self {
+            Strategy::Kim => kim_cap_sign(p0, p1, p2, l),
+            Strategy::Peciva => peciva_sign(p0, p1, p2, l),
+            Strategy::Reference => tri_sign(p0, p1, p2, l),
+            Strategy::ReferenceF64 => tri_sign_f64(p0, p1, p2, l),
+            Strategy::Exact => exact_sign(p0, p1, p2, l),
+        }
+    }
+}
+
+/// Pečiva 2013: Kim's test on all three edges of the triangle in one fixed
+/// (lexicographic) corner order; 0 when they disagree. Every occurrence of a
+/// triangle computes the same three expressions, so it is consistent.
+#[inline(always)]
+pub fn peciva_sign(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
+    let ([a, b, c], parity) = sort3(p0, p1, p2);
+    let s0 = kim_sign(a, b, c, l);
+    let s1 = kim_sign(b, c, a, l);
+    let s2 = kim_sign(c, a, b, l);
+    if s0 == s1 && s1 == s2 { parity * s0 } else { 0 }
+}
+
+/// The reference expression of [`crate::multiplicity::ref_sign`] in f64 on
+/// the same sorted corners (consistent for the same reason, but rounds far
+/// less; still not exact).
+#[inline(always)]
+pub fn tri_sign_f64(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
+    let ([r0, r1, r2], parity) = sort3(p0, p1, p2);
+    if l[3] == 1.0 && [r0, r1, r2].contains(&[l[0], l[1], l[2]]) {
+        return 0;
+    }
+    let f = |v: [f32; 3]| v.map(|x| x as f64);
+    let (r0, r1, r2) = (f(r0), f(r1), f(r2));
+    let l = l.map(|x| x as f64);
+    let x = [r2[0] - r0[0], r2[1] - r0[1], r2[2] - r0[2]];
+    let y = [
+        l[0] - r0[0] * l[3],
+        l[1] - r0[1] * l[3],
+        l[2] - r0[2] * l[3],
+    ];
+    let d = [r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]];
+    let n = [
+        x[1] * y[2] - x[2] * y[1],
+        x[2] * y[0] - x[0] * y[2],
+        x[0] * y[1] - x[1] * y[0],
+    ];
+    let s = (n[0] * d[0] + n[1] * d[1]) + n[2] * d[2];
+    parity * ((s > 0.0) as i32 - (s < 0.0) as i32)
+}
+
+/// Exact orientation of `(p0, p1, p2)` towards the light: +1 when the light
+/// sees it counter-clockwise (the sign convention of [`tri_sign`]).
+#[inline(always)]
+pub fn exact_sign(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
+    let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
+    // det[P0; P1; P2; L] = −N·(L − P0·w).
+    -crate::exact::det4_sign([h(p0), h(p1), h(p2), l.map(|v| v as f64)])
 }
 
 /// Kim 2008's per-edge test: side of opposite vertex `o` relative to the
@@ -82,10 +189,20 @@ pub fn side_multiplicities_with(
     light: Light,
     out: &mut [i8],
 ) {
-    let sign = match strategy {
-        Strategy::Reference => tri_sign,
-        Strategy::Kim => kim_sign,
-    };
+    // One monomorphised loop per strategy: the sign function inlines.
+    match strategy {
+        Strategy::Kim => sides_loop(kim_sign, k, data, light, out),
+        Strategy::Peciva => sides_loop(peciva_sign, k, data, light, out),
+        Strategy::Reference => sides_loop(tri_sign, k, data, light, out),
+        Strategy::ReferenceF64 => sides_loop(tri_sign_f64, k, data, light, out),
+        Strategy::Exact => sides_loop(exact_sign, k, data, light, out),
+    }
+}
+
+fn sides_loop<F>(sign: F, k: usize, data: &[f32], light: Light, out: &mut [i8])
+where
+    F: Fn([f32; 3], [f32; 3], [f32; 3], Light) -> i32 + Sync,
+{
     let stride = (2 + k) * 4;
     assert_eq!(data.len(), out.len() * stride, "bucket size mismatch");
     out.par_chunks_mut(CHUNK)
@@ -110,10 +227,19 @@ pub fn cap_signs(data: &[f32], light: Light, out: &mut [i8]) {
 
 /// [`cap_signs`] with an explicit strategy.
 pub fn cap_signs_with(strategy: Strategy, data: &[f32], light: Light, out: &mut [i8]) {
-    let sign = match strategy {
-        Strategy::Reference => tri_sign,
-        Strategy::Kim => kim_cap_sign,
-    };
+    match strategy {
+        Strategy::Kim => caps_loop(kim_cap_sign, data, light, out),
+        Strategy::Peciva => caps_loop(peciva_sign, data, light, out),
+        Strategy::Reference => caps_loop(tri_sign, data, light, out),
+        Strategy::ReferenceF64 => caps_loop(tri_sign_f64, data, light, out),
+        Strategy::Exact => caps_loop(exact_sign, data, light, out),
+    }
+}
+
+fn caps_loop<F>(sign: F, data: &[f32], light: Light, out: &mut [i8])
+where
+    F: Fn([f32; 3], [f32; 3], [f32; 3], Light) -> i32 + Sync,
+{
     assert_eq!(data.len(), out.len() * 12, "caps size mismatch");
     out.par_chunks_mut(CHUNK)
         .zip(data.par_chunks(CHUNK * 12))
@@ -160,5 +286,94 @@ mod tests {
             assert_eq!(kim_sign(t[1], t[2], t[0], l), r);
             assert_eq!(kim_sign(t[1], t[0], t[2], l), -r);
         }
+    }
+
+    #[test]
+    fn consistent_strategies_agree_under_every_corner_order() {
+        // Near-parallel lights: Kim's three expressions can disagree here, but
+        // Pečiva, f64 and exact evaluate one canonical expression per triangle.
+        let mut seed = 777u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let perms = [
+            [0, 1, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [1, 0, 2],
+            [0, 2, 1],
+            [2, 1, 0],
+        ];
+        for _ in 0..5000 {
+            let t = [
+                [rnd(), rnd(), rnd() * 1e-6],
+                [rnd(), rnd(), rnd() * 1e-6],
+                [rnd(), rnd(), rnd() * 1e-6],
+            ];
+            let l = [rnd() * 10.0, rnd() * 10.0, rnd() * 1e-6, 1.0];
+            for s in [Strategy::Peciva, Strategy::ReferenceF64, Strategy::Exact] {
+                let base = s.cap_sign(t[0], t[1], t[2], l);
+                for (n, p) in perms.iter().enumerate() {
+                    let want = if n < 3 { base } else { -base };
+                    assert_eq!(s.side_sign(t[p[0]], t[p[1]], t[p[2]], l), want, "{s:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn exact_is_exact_where_f32_is_not() {
+        // A light 1e-7 off the plane z = 0 of a large triangle: f32 rounds
+        // the reference expression, the exact predicate does not.
+        let t = [[0.0, 0.0, 0.0], [1000.0, 0.0, 0.0], [0.0, 1000.0, 0.0]];
+        assert_eq!(exact_sign(t[0], t[1], t[2], [3.0, 5.0, 1e-7, 1.0]), 1);
+        assert_eq!(exact_sign(t[0], t[1], t[2], [3.0, 5.0, -1e-7, 1.0]), -1);
+        assert_eq!(exact_sign(t[0], t[1], t[2], [3.0, 5.0, 0.0, 1.0]), 0);
+        // Every strategy agrees with exact far from the plane.
+        for l in [[0.2, 0.3, 4.0, 1.0], [1.0, -2.0, -3.0, 0.0]] {
+            let e = exact_sign(t[0], t[1], t[2], l);
+            for s in Strategy::ALL {
+                assert_eq!(s.cap_sign(t[0], t[1], t[2], l), e, "{s:?}");
+                assert_eq!(s.side_sign(t[0], t[1], t[2], l), e, "{s:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn peciva_discards_a_triangle_whose_edge_tests_disagree() {
+        // Search a near-parallel configuration where Kim's three edge tests
+        // disagree; Pečiva must give 0 there, and Kim's own edges must differ.
+        let mut seed = 4242u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let mut found = 0;
+        for _ in 0..200_000 {
+            // Corners and light (nearly) on the tilted plane z = 0.1x + 0.37y.
+            let mut on = |s: f32| {
+                let (x, y) = (rnd() * s, rnd() * s);
+                [x, y, 0.1 * x + 0.37 * y]
+            };
+            let t = [on(1.0), on(1.0), on(1.0)];
+            let p = on(50.0);
+            let l = [p[0], p[1], p[2], 1.0];
+            let ([a, b, c], _) = sort3(t[0], t[1], t[2]);
+            let k = [
+                kim_sign(a, b, c, l),
+                kim_sign(b, c, a, l),
+                kim_sign(c, a, b, l),
+            ];
+            if k[0] != k[1] || k[1] != k[2] {
+                found += 1;
+                assert_eq!(peciva_sign(t[0], t[1], t[2], l), 0);
+            }
+        }
+        assert!(found > 0, "no disagreeing configuration found");
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! 0   8  magic  "SVPK\r\n\x1a\n"
-//! 8   2  u16    version major (1)
+//! 8   2  u16    version major (2)
 //! 10  2  u16    version minor (0)
 //! 12  4  u32    header length H
 //! 16  4  u32    CRC-32 of the header bytes
@@ -22,8 +22,9 @@ use std::path::Path;
 
 /// File magic: "SVPK" then the PNG-style line-ending/EOF guard.
 pub const MAGIC: [u8; 8] = *b"SVPK\r\n\x1a\n";
-/// Major version: readers reject any other major.
-pub const VERSION_MAJOR: u16 = 1;
+/// Major version: readers reject any other major. 2.0 added the position
+/// encoding (f32 or 16-bit quantised) and the per-mesh record-space transform.
+pub const VERSION_MAJOR: u16 = 2;
 /// Minor version: readers accept any minor of their major (fields are only
 /// ever appended to the header, and the header length lets old readers skip them).
 pub const VERSION_MINOR: u16 = 0;
@@ -49,7 +50,7 @@ pub struct Header {
     pub payload_len: u64,
     /// CRC-32 (IEEE, as zlib/PNG) of the payload bytes.
     pub payload_crc32: u32,
-    /// Tool that wrote the file, e.g. "svpack 0.1.0".
+    /// Tool that wrote the file, e.g. "svpack 0.2.0".
     pub generator: String,
     /// Where the geometry came from.
     pub input: InputInfo,
@@ -83,6 +84,86 @@ pub struct BuildOptions {
     pub max_mult: u32,
     /// Whether the file was written zstd-wrapped.
     pub compress: bool,
+    /// How record vec4s are stored: [`Encoding::code`] (0 = f32, 1 = unorm16).
+    pub positions: u8,
+}
+
+impl BuildOptions {
+    /// The position encoding, or an error for an unknown code.
+    pub fn encoding(&self) -> std::result::Result<Encoding, String> {
+        Encoding::from_code(self.positions)
+    }
+}
+
+/// How the vec4s of sides and caps records are stored (format-spec §4.5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Encoding {
+    /// Four little-endian f32 per vec4 (16 bytes); record space is world space.
+    #[default]
+    F32,
+    /// Four little-endian u16 per vec4 (8 bytes): `xyz` are read as normalized
+    /// UNSIGNED_SHORT (`c / 65535`) over the mesh's quantisation box, `w` holds
+    /// the raw integer.
+    Unorm16,
+}
+
+impl Encoding {
+    /// Code stored in `BuildOptions::positions`.
+    pub fn code(self) -> u8 {
+        match self {
+            Encoding::F32 => 0,
+            Encoding::Unorm16 => 1,
+        }
+    }
+
+    /// Encoding for a stored code.
+    pub fn from_code(code: u8) -> std::result::Result<Encoding, String> {
+        match code {
+            0 => Ok(Encoding::F32),
+            1 => Ok(Encoding::Unorm16),
+            c => Err(format!(
+                "unknown position encoding {c} (known: 0 = f32, 1 = unorm16)"
+            )),
+        }
+    }
+
+    /// Name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::F32 => "f32",
+            Encoding::Unorm16 => "unorm16",
+        }
+    }
+
+    /// Bytes per stored vec4.
+    pub fn vec4_bytes(self) -> u64 {
+        match self {
+            Encoding::F32 => 16,
+            Encoding::Unorm16 => 8,
+        }
+    }
+
+    /// Largest `.w` integer the encoding stores exactly; `B.w` saturates here.
+    pub fn w_limit(self) -> f32 {
+        match self {
+            Encoding::F32 => 16_777_216.0,
+            Encoding::Unorm16 => 65_535.0,
+        }
+    }
+}
+
+/// Record-space value of a unorm16 code: `c / 65535` rounded once to f32, as
+/// the GL conversion of a normalized UNSIGNED_SHORT (format-spec §4.5).
+#[inline(always)]
+pub fn unorm16_to_f32(c: u16) -> f32 {
+    c as f32 / 65535.0
+}
+
+/// The unorm16 code whose record-space value is `u` (exact inverse of
+/// [`unorm16_to_f32`] on its image; clamps anything else into 0..=65535).
+#[inline(always)]
+pub fn f32_to_unorm16(u: f32) -> u16 {
+    (u as f64 * 65535.0).round().clamp(0.0, 65535.0) as u16
 }
 
 /// A mesh: one welded triangle set with its caps and side buckets.
@@ -94,9 +175,14 @@ pub struct MeshHeader {
     pub bounds_min: [f32; 3],
     /// Upper bounds.
     pub bounds_max: [f32; 3],
+    /// Record space to world space: `world = position_offset + record · position_scale`
+    /// per axis (f32 encoding: zeros and ones, record space is world space).
+    pub position_offset: [f32; 3],
+    /// Per-axis scale of that transform (all > 0).
+    pub position_scale: [f32; 3],
     /// Build statistics.
     pub stats: MeshStats,
-    /// Caps section: `count` triangles, 48 bytes each.
+    /// Caps section: `count` triangles, 3 vec4 each.
     pub caps: Section,
     /// Side buckets, increasing k, only non-empty ones.
     pub buckets: Vec<BucketHeader>,
@@ -122,7 +208,7 @@ pub struct BucketHeader {
     pub instances: u64,
     /// Absolute byte offset (multiple of 16).
     pub offset: u64,
-    /// `16 · (2 + k) · instances`.
+    /// `vec4_bytes · (2 + k) · instances`.
     pub length: u64,
 }
 
@@ -212,26 +298,47 @@ pub fn align_up(v: u64) -> u64 {
 pub struct MeshPayload<'a> {
     /// Mesh header; section offsets and lengths are filled in by [`encode_to`].
     pub header: MeshHeader,
-    /// Caps floats.
+    /// Caps floats, in record space.
     pub caps: &'a [f32],
-    /// Side bucket floats, in the order of `header.buckets`.
+    /// Side bucket floats, in record space, in the order of `header.buckets`.
     pub buckets: Vec<&'a [f32]>,
 }
 
-/// Writes `floats` as little-endian bytes to `out`, through a small buffer.
-fn write_f32_le<W: Write>(out: &mut W, floats: &[f32]) -> std::io::Result<()> {
+/// Writes record floats (vec4 after vec4) in `enc`, then zeros up to the
+/// next multiple of [`ALIGN`], through a small buffer. Unorm16 stores `xyz`
+/// as the codes of their record-space values and `w` as a saturated integer.
+fn write_records<W: Write>(out: &mut W, floats: &[f32], enc: Encoding) -> std::io::Result<()> {
     let mut buf = [0u8; 1 << 16];
+    let mut written = 0u64;
     for chunk in floats.chunks(buf.len() / 4) {
-        for (i, v) in chunk.iter().enumerate() {
-            buf[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
-        }
-        out.write_all(&buf[..chunk.len() * 4])?;
+        let n = match enc {
+            Encoding::F32 => {
+                for (i, v) in chunk.iter().enumerate() {
+                    buf[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+                }
+                chunk.len() * 4
+            }
+            Encoding::Unorm16 => {
+                for (i, v) in chunk.iter().enumerate() {
+                    let c = if i % 4 == 3 {
+                        v.clamp(0.0, 65535.0) as u16
+                    } else {
+                        f32_to_unorm16(*v)
+                    };
+                    buf[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
+                }
+                chunk.len() * 2
+            }
+        };
+        out.write_all(&buf[..n])?;
+        written += n as u64;
     }
-    Ok(())
+    let pad = (align_up(written) - written) as usize;
+    out.write_all(&[0u8; 16][..pad])
 }
 
-/// CRC-32 of `floats` as little-endian bytes.
-fn crc_f32_le(hasher: &mut crc32fast::Hasher, floats: &[f32]) {
+/// CRC-32 of what [`write_records`] writes.
+fn crc_records(hasher: &mut crc32fast::Hasher, floats: &[f32], enc: Encoding) {
     struct H<'a>(&'a mut crc32fast::Hasher);
     impl Write for H<'_> {
         fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
@@ -242,7 +349,7 @@ fn crc_f32_le(hasher: &mut crc32fast::Hasher, floats: &[f32]) {
             Ok(())
         }
     }
-    write_f32_le(&mut H(hasher), floats).expect("hashing cannot fail");
+    write_records(&mut H(hasher), floats, enc).expect("hashing cannot fail");
 }
 
 /// Fills section offsets, lengths and the payload checksum into a header.
@@ -252,6 +359,8 @@ pub fn finalize_header(
     meshes: &[MeshPayload<'_>],
 ) -> Result<(Vec<u8>, Header)> {
     header.meshes = meshes.iter().map(|m| m.header.clone()).collect();
+    let enc = header.options.encoding().map_err(Error::Other)?;
+    let vec4 = enc.vec4_bytes();
     let encode = |h: &Header| {
         bincode::serde::encode_to_vec(h, bincode_config())
             .map_err(|e| Error::Other(format!("cannot encode header: {e}")))
@@ -265,16 +374,16 @@ pub fn finalize_header(
     for (mh, m) in header.meshes.iter_mut().zip(meshes) {
         mh.caps = Section {
             offset,
-            length: m.caps.len() as u64 * 4,
+            length: m.caps.len() as u64 / 4 * vec4,
             count: m.caps.len() as u64 / 12,
         };
-        offset += mh.caps.length;
-        crc_f32_le(&mut crc, m.caps);
+        offset = align_up(offset + mh.caps.length);
+        crc_records(&mut crc, m.caps, enc);
         for (bh, data) in mh.buckets.iter_mut().zip(&m.buckets) {
             bh.offset = offset;
-            bh.length = data.len() as u64 * 4;
-            offset += bh.length;
-            crc_f32_le(&mut crc, data);
+            bh.length = data.len() as u64 / 4 * vec4;
+            offset = align_up(offset + bh.length);
+            crc_records(&mut crc, data, enc);
         }
     }
     header.payload_offset = payload_offset;
@@ -303,10 +412,11 @@ pub fn encode_to<W: Write>(
     out.write_all(&hbytes).map_err(io)?;
     let pad = header.payload_offset as usize - PREAMBLE_LEN - hbytes.len();
     out.write_all(&[0u8; 16][..pad]).map_err(io)?;
+    let enc = header.options.encoding().map_err(Error::Other)?;
     for m in meshes {
-        write_f32_le(out, m.caps).map_err(io)?;
+        write_records(out, m.caps, enc).map_err(io)?;
         for b in &m.buckets {
-            write_f32_le(out, b).map_err(io)?;
+            write_records(out, b, enc).map_err(io)?;
         }
     }
     Ok(header)
@@ -388,12 +498,34 @@ pub struct SvpkFile {
 }
 
 impl SvpkFile {
-    /// Little-endian floats of a section (copied; the byte buffer is not f32-aligned in Rust).
+    /// The file's position encoding (validated when the file was read).
+    pub fn encoding(&self) -> Encoding {
+        self.header.options.encoding().unwrap_or_default()
+    }
+
+    /// A section's vec4s as record-space floats (copied; the byte buffer is
+    /// not f32-aligned in Rust). Unorm16 `xyz` become `c / 65535`, `w` the
+    /// stored integer.
     pub fn floats(&self, offset: u64, length: u64) -> Vec<f32> {
-        self.bytes[offset as usize..(offset + length) as usize]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect()
+        let bytes = &self.bytes[offset as usize..(offset + length) as usize];
+        match self.encoding() {
+            Encoding::F32 => bytes
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+            Encoding::Unorm16 => bytes
+                .chunks_exact(2)
+                .enumerate()
+                .map(|(i, c)| {
+                    let v = u16::from_le_bytes([c[0], c[1]]);
+                    if i % 4 == 3 {
+                        v as f32
+                    } else {
+                        unorm16_to_f32(v)
+                    }
+                })
+                .collect(),
+        }
     }
 }
 
@@ -427,7 +559,12 @@ pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
     let (major, minor) = (u16_at(8), u16_at(10));
     if major != VERSION_MAJOR {
         return Err(err(format!(
-            "unsupported format version {major}.{minor} (this svpack reads {VERSION_MAJOR}.x)"
+            "unsupported format version {major}.{minor} (this svpack reads {VERSION_MAJOR}.x{})",
+            if major < VERSION_MAJOR {
+                "; rebuild the file from its source with this svpack"
+            } else {
+                "; a newer svpack wrote it"
+            }
         )));
     }
     let header_len = u32_at(12) as usize;
@@ -517,16 +654,33 @@ fn validate_layout(
     if h.options.max_mult == 0 || h.options.max_mult > crate::layout::MAX_MAX_MULT {
         return Err(format!("max_mult {} out of range", h.options.max_mult));
     }
+    let vec4 = h.options.encoding()?.vec4_bytes();
     let mut at = h.payload_offset;
     for (mi, m) in h.meshes.iter().enumerate() {
-        let caps_len = m.caps.count.checked_mul(48).ok_or("caps count overflows")?;
+        if !m
+            .position_scale
+            .iter()
+            .chain(&m.position_offset)
+            .all(|v| v.is_finite())
+            || m.position_scale.iter().any(|&v| v <= 0.0)
+        {
+            return Err(format!(
+                "mesh {mi}: position transform offset {:?} scale {:?} is invalid (finite, scale > 0)",
+                m.position_offset, m.position_scale
+            ));
+        }
+        let caps_len = m
+            .caps
+            .count
+            .checked_mul(3 * vec4)
+            .ok_or("caps count overflows")?;
         if m.caps.offset != at || m.caps.length != caps_len {
             return Err(format!(
                 "mesh {mi}: caps section at {}+{} should be at {at}+{caps_len}",
                 m.caps.offset, m.caps.length
             ));
         }
-        at = at.checked_add(caps_len).ok_or("section offsets overflow")?;
+        at = align_up(at.checked_add(caps_len).ok_or("section offsets overflow")?);
         let mut last_k = 0;
         for b in &m.buckets {
             if b.k <= last_k || b.k > h.options.max_mult || b.instances == 0 {
@@ -538,7 +692,7 @@ fn validate_layout(
             last_k = b.k;
             let len = b
                 .instances
-                .checked_mul(16 * (2 + b.k as u64))
+                .checked_mul(vec4 * (2 + b.k as u64))
                 .ok_or("bucket size overflows")?;
             if b.offset != at || b.length != len {
                 return Err(format!(
@@ -546,7 +700,7 @@ fn validate_layout(
                     b.k, b.offset, b.length
                 ));
             }
-            at = at.checked_add(len).ok_or("section offsets overflow")?;
+            at = align_up(at.checked_add(len).ok_or("section offsets overflow")?);
         }
     }
     if at != end {

@@ -1,15 +1,18 @@
 //! svpack: silhouette shadow-volume geometry for WebGL 1.
 //!
 //! Data path: [`load`] → [`weld`] → [`topology`] → [`layout`] → [`format`].
+pub mod accuracy;
 pub mod build;
 pub mod error;
 pub mod evaluate;
 pub mod exact;
 pub mod format;
+pub mod hardcases;
 pub mod layout;
 pub mod lint;
 pub mod load;
 pub mod multiplicity;
+pub mod quantize;
 pub mod report;
 pub mod shadow;
 pub mod topology;

@@ -46,6 +46,13 @@ enum Command {
         /// Wrap the file in a zstd frame (readers detect it).
         #[arg(long)]
         compress: bool,
+        /// Position encoding: `f32` (16 bytes per vec4, exact input
+        /// positions) or `unorm16` (8 bytes per vec4: positions quantised to
+        /// 16 bits over the mesh bounds; format-spec §4.5). Quantisation moves
+        /// vertices by at most half a step (bounds / 131070 per axis); the
+        /// volumes stay closed.
+        #[arg(long, value_enum, default_value_t = PositionsArg::F32)]
+        positions: PositionsArg,
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
@@ -89,6 +96,32 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Benchmarks. `--accuracy`: speed against error of the multiplicity
+    /// strategies (Kim 2008, Pečiva 2013, reference edge f32 and f64, exact)
+    /// and of the f32 and unorm16 encodings, on the built-in hard-case suite
+    /// and INPUTS; writes accuracy.md, accuracy.json and accuracy.svg to --out.
+    Bench {
+        /// Run the accuracy benchmark (the only one so far).
+        #[arg(long, required = true)]
+        accuracy: bool,
+        /// Model files (.obj, .gltf, .glb) besides the hard-case suite.
+        inputs: Vec<PathBuf>,
+        /// Output directory (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Generated lights per input.
+        #[arg(long, default_value_t = 16)]
+        lights: usize,
+        /// Sample points per input for the shadow-truth checks.
+        #[arg(long, default_value_t = 64)]
+        samples: usize,
+        /// Seed for lights and samples.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Leave out the built-in hard-case suite.
+        #[arg(long)]
+        no_hard_cases: bool,
+    },
     /// Replay a .svpk file on the CPU: check the sides/caps bijection and,
     /// per light, that the emitted shadow volume is closed. Exit 2 on failure.
     Verify {
@@ -122,16 +155,27 @@ struct LightArgs {
     /// bounds, and on a receiver plane below the model); 0 skips the check.
     #[arg(long, default_value_t = 256)]
     samples: usize,
-    /// Evaluator replayed: `reference` (the format's contract) or `kim`
-    /// (Kim 2008's per-edge light plane, to see it crack).
+    /// Evaluator replayed: `reference` (the format's contract, what the
+    /// shaders compute); peers: `kim` (Kim 2008's per-edge light plane, to see
+    /// it crack), `peciva` (Pečiva 2013: discard triangles whose three edge
+    /// tests disagree), `reference-f64`, `exact`.
     #[arg(long, value_enum, default_value_t = EvaluatorArg::Reference)]
     evaluator: EvaluatorArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum PositionsArg {
+    F32,
+    Unorm16,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum EvaluatorArg {
     Reference,
     Kim,
+    Peciva,
+    ReferenceF64,
+    Exact,
 }
 
 fn parse_light(s: &str) -> Result<[f32; 4], String> {
@@ -146,17 +190,35 @@ fn run_verify(
     json: bool,
 ) -> Result<bool, svpack::error::Error> {
     let f = svpack::format::read_file(file)?;
-    let mut lights = args.light.clone();
+    use svpack::verify::VerifyLight;
+    let mut lights: Vec<VerifyLight> = args.light.iter().map(|&l| VerifyLight::World(l)).collect();
     let generated = args
         .lights
         .unwrap_or(if lights.is_empty() { 16 } else { 0 });
     if generated > 0 && f.header.meshes.iter().any(|m| m.caps.count > 0) {
+        // Generated in record space, where the hard placements are exact
+        // (the same as world space for f32 files).
         let d = svpack::verify::decode(&f, 0);
-        lights.extend(svpack::verify::choose_lights(&d, generated, args.seed));
+        let world = f.encoding() == svpack::format::Encoding::F32;
+        lights.extend(
+            svpack::verify::choose_lights(&d, generated, args.seed)
+                .into_iter()
+                .map(|l| {
+                    if world {
+                        VerifyLight::World(l)
+                    } else {
+                        VerifyLight::Record(l)
+                    }
+                }),
+        );
     }
+    use svpack::evaluate::Strategy;
     let strategy = match args.evaluator {
-        EvaluatorArg::Reference => svpack::evaluate::Strategy::Reference,
-        EvaluatorArg::Kim => svpack::evaluate::Strategy::Kim,
+        EvaluatorArg::Reference => Strategy::Reference,
+        EvaluatorArg::Kim => Strategy::Kim,
+        EvaluatorArg::Peciva => Strategy::Peciva,
+        EvaluatorArg::ReferenceF64 => Strategy::ReferenceF64,
+        EvaluatorArg::Exact => Strategy::Exact,
     };
     let rep = svpack::verify::verify(&f, &lights, strategy, args.samples);
     if json {
@@ -186,8 +248,12 @@ fn run_verify(
         );
         for l in &rep.lights {
             let name = format!(
-                "({}, {}, {}, {})",
-                l.light[0], l.light[1], l.light[2], l.light[3]
+                "({}, {}, {}, {}){}",
+                l.light[0],
+                l.light[1],
+                l.light[2],
+                l.light[3],
+                if l.space == "record" { " rec" } else { "" }
             );
             println!(
                 "  {name:<42} {:>10} {:>8} {:>8} {:>11} {:>8} {:>8} {:>11} {:>6.1}",
@@ -343,11 +409,19 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             jobs,
             max_mult,
             compress,
+            positions,
             json,
             verify,
             lights,
         } => {
-            let cfg = BuildConfig { max_mult, compress };
+            let cfg = BuildConfig {
+                max_mult,
+                compress,
+                positions: match positions {
+                    PositionsArg::F32 => svpack::format::Encoding::F32,
+                    PositionsArg::Unorm16 => svpack::format::Encoding::Unorm16,
+                },
+            };
             let batch = inputs.len() > 1 || output.is_dir();
             let outputs = if batch {
                 std::fs::create_dir_all(&output)
@@ -460,6 +534,38 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                 return Err(svpack::error::Error::Other(
                     "some files could not be read".into(),
                 ));
+            }
+        }
+        Command::Bench {
+            accuracy: _,
+            inputs,
+            out,
+            lights,
+            samples,
+            seed,
+            no_hard_cases,
+        } => {
+            let cfg = svpack::accuracy::AccuracyConfig {
+                lights,
+                samples,
+                seed,
+                hard_cases: !no_hard_cases,
+                ..Default::default()
+            };
+            let work = tempfile::tempdir().map_err(|e| svpack::error::Error::io(&out, e))?;
+            let rep =
+                svpack::accuracy::run(&inputs, &cfg, work.path(), &mut |line| eprintln!("{line}"))?;
+            let paths = svpack::accuracy::write_outputs(&rep, &out)?;
+            print!("{}", svpack::accuracy::to_markdown(&rep));
+            for p in paths {
+                eprintln!("wrote {}", p.display());
+            }
+            eprintln!("{:.1} s", rep.seconds);
+            if !rep.failed.is_empty() {
+                return Err(svpack::error::Error::Other(format!(
+                    "{} inputs could not be built",
+                    rep.failed.len()
+                )));
             }
         }
         Command::Verify { file, json, lights } => {

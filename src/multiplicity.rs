@@ -79,9 +79,17 @@ pub fn ref_sign(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], l: Light) -> i32 {
 /// opposite vertex `O`: `tri_sign(A, B, O, L)`) and a cap's orientation.
 #[inline(always)]
 pub fn tri_sign(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
+    let ([a, b, c], parity) = sort3(p0, p1, p2);
+    parity * ref_sign(a, b, c, l)
+}
+
+/// The corners in lexicographic order and the parity (+1 even, −1 odd) of the
+/// permutation that sorted them: the three-comparator network of the spec.
+#[inline(always)]
+pub fn sort3(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3]) -> ([[f32; 3]; 3], i32) {
     let (mut a, mut b, mut c) = (p0, p1, p2);
     let mut parity = 1;
-    // Three-comparator sorting network; each swap is an odd permutation.
+    // Each swap is an odd permutation.
     if lex_less(b, a) {
         std::mem::swap(&mut a, &mut b);
         parity = -parity;
@@ -94,7 +102,7 @@ pub fn tri_sign(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
         std::mem::swap(&mut a, &mut b);
         parity = -parity;
     }
-    parity * ref_sign(a, b, c, l)
+    ([a, b, c], parity)
 }
 
 /// Multiplicity of edge `a → b` (with `a < b`) over its opposite vertices: the

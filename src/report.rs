@@ -55,6 +55,8 @@ pub struct Summary {
     pub input_sha256: String,
     /// K.
     pub max_mult: u32,
+    /// Position encoding: "f32" or "unorm16".
+    pub positions: String,
     /// Whether the file is zstd-wrapped.
     pub compressed: bool,
     /// Totals over all meshes (flattened into the JSON object).
@@ -135,6 +137,11 @@ impl Summary {
             input_bytes: h.input.bytes,
             input_sha256: hex(&h.input.sha256),
             max_mult: h.options.max_mult,
+            positions: h
+                .options
+                .encoding()
+                .map(|e| e.name().to_string())
+                .unwrap_or_else(|_| format!("unknown ({})", h.options.positions)),
             compressed,
             stats: stats.clone(),
             buckets,
@@ -214,10 +221,11 @@ impl Summary {
         let _ = writeln!(o, "         edges by opposite count  {}", hist.join("  "));
         let _ = writeln!(
             o,
-            "sides:   {} instances, {} (K = {})",
+            "sides:   {} instances, {} (K = {}, {} positions)",
             self.stats.edge_instances,
             human_bytes(self.sides_bytes),
-            self.max_mult
+            self.max_mult,
+            self.positions
         );
         for b in &self.buckets {
             let _ = writeln!(

@@ -334,6 +334,31 @@ struct Emitted {
     weight: i32,
 }
 
+/// Exact shadow truth at `p`: the number of triangles the open segment from
+/// `p` to the light crosses (the ray towards a directional light), or `None`
+/// when `p` lies on a triangle or the segment touches one degenerately (an
+/// edge, a vertex, or lying in its plane), where "in shadow" has no single
+/// answer.
+pub fn occluders(index: &ShadowIndex, light: Light, p: [f32; 3]) -> Option<u32> {
+    let lh = hom(light);
+    let ph = fin(p);
+    let (dir, t_max) = if light[3] == 0.0 {
+        ([lh[0], lh[1], lh[2]], f64::INFINITY)
+    } else {
+        ([lh[0] - ph[0], lh[1] - ph[1], lh[2] - ph[2]], 1.0)
+    };
+    let mut count = 0u32;
+    let mut ambiguous = false;
+    index.bvh.query([ph[0], ph[1], ph[2]], dir, t_max, |i| {
+        match meet(ph, lh, index.tris[i as usize].map(fin)) {
+            Meet::Cross(_) => count += 1,
+            Meet::None => {}
+            Meet::AOnTriangle | Meet::Degenerate => ambiguous = true,
+        }
+    });
+    (!ambiguous).then_some(count)
+}
+
 /// Checks `samples` against the volume emitted under `ev` for `light`.
 pub fn check_shadow(
     d: &Decoded,
@@ -385,7 +410,6 @@ pub fn check_shadow(
             }
         }
     }
-    let lh = hom(light);
     // Per-direction data, built on first use (by whichever thread needs it).
     let back_terms: Vec<OnceLock<Option<i32>>> =
         (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
@@ -395,21 +419,10 @@ pub fn check_shadow(
         .map(|&s| {
             let p = fin(s);
             let p3 = [p[0], p[1], p[2]];
-            // Truth: triangles crossed by the open segment P → L (ray to a directional light).
-            let (dir, t_max) = if light[3] == 0.0 {
-                ([lh[0], lh[1], lh[2]], f64::INFINITY)
-            } else {
-                ([lh[0] - p[0], lh[1] - p[1], lh[2] - p[2]], 1.0)
+            let (truth, mut ambiguous) = match occluders(index, light, s) {
+                Some(n) => (n as i32, false),
+                None => (0, true),
             };
-            let mut truth = 0i32;
-            let mut ambiguous = false;
-            index.bvh.query(p3, dir, t_max, |i| {
-                match meet(p, lh, index.tris[i as usize].map(fin)) {
-                    Meet::Cross(_) => truth += 1,
-                    Meet::None => {}
-                    Meet::AOnTriangle | Meet::Degenerate => ambiguous = true,
-                }
-            });
             // Winding: first direction whose ray touches nothing degenerately.
             let mut winding = None;
             for (k, dk) in DIRECTIONS.iter().enumerate() {

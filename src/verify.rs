@@ -19,9 +19,14 @@ use crate::format::SvpkFile;
 use crate::multiplicity::{Light, cap_corner, lex_less, side_corner, to_infinity};
 use rustc_hash::FxHashMap;
 
-/// One mesh of a file, decoded for checking.
+/// One mesh of a file, decoded for checking. Everything is in the mesh's
+/// record space (format-spec §4.5), where the shaders compute.
 #[derive(Debug, Clone)]
 pub struct Decoded {
+    /// Record space → world space.
+    pub space: crate::quantize::RecordSpace,
+    /// Largest `.w` integer the encoding stores (`B.w` saturates there).
+    pub w_limit: f32,
     /// Distinct caps positions, lexicographically sorted; ids index this.
     pub positions: Vec<[f32; 3]>,
     /// Caps records as floats (12 per triangle), as the GPU reads them.
@@ -109,6 +114,11 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         })
         .collect();
     Decoded {
+        space: crate::quantize::RecordSpace {
+            offset: m.position_offset,
+            scale: m.position_scale,
+        },
+        w_limit: file.encoding().w_limit(),
         positions,
         caps_data,
         caps,
@@ -190,7 +200,7 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
         }
     }
     for ((a, b), (n, bw)) in &edge_totals {
-        if *n as f32 != *bw {
+        if (*n as f32).min(d.w_limit) != *bw {
             rep.record_errors += 1;
             note(
                 &mut rep,
@@ -471,11 +481,41 @@ pub fn choose_lights(d: &Decoded, count: usize, seed: u64) -> Vec<Light> {
     out
 }
 
+/// A light to verify under: in world space (moved into each mesh's record
+/// space with [`crate::quantize::RecordSpace::light_to_record`], as a renderer
+/// does), or already in record space (generated lights, whose hard placements
+/// are exact only there). For f32 files the two spaces are the same.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VerifyLight {
+    /// World-space light.
+    World(Light),
+    /// Record-space light, used as is for every mesh.
+    Record(Light),
+}
+
+impl From<Light> for VerifyLight {
+    fn from(l: Light) -> Self {
+        VerifyLight::World(l)
+    }
+}
+
+impl VerifyLight {
+    /// The light in `d`'s record space.
+    pub fn in_record_space(self, d: &Decoded) -> Light {
+        match self {
+            VerifyLight::World(l) => d.space.light_to_record(l),
+            VerifyLight::Record(l) => l,
+        }
+    }
+}
+
 /// Per-light line of a verify report.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct LightReport {
-    /// The light (x, y, z, w).
+    /// The light (x, y, z, w), in the space `space` names.
     pub light: [f32; 4],
+    /// "world", or "record" for a light given in record space.
+    pub space: &'static str,
     /// Side records with m != 0.
     pub silhouette_instances: u64,
     /// Side quads drawn (sum of |m|).
@@ -559,9 +599,9 @@ pub struct VerifyReport {
 /// Runs checks 1, 2 and 3 on every mesh of `file` for every light, evaluating
 /// the volumes with `strategy` (the format's is [`Strategy::Reference`]);
 /// check 3 uses `samples` points per mesh (0 skips it).
-pub fn verify(
+pub fn verify<L: Copy + Into<VerifyLight>>(
     file: &SvpkFile,
-    lights: &[Light],
+    lights: &[L],
     strategy: Strategy,
     samples: usize,
 ) -> VerifyReport {
@@ -607,10 +647,16 @@ pub fn verify(
         .iter()
         .map(|d| crate::shadow::choose_samples(d, samples, 1))
         .collect();
-    for &light in lights {
+    for &given in lights {
+        let given: VerifyLight = given.into();
         let t = std::time::Instant::now();
+        let (light, space) = match given {
+            VerifyLight::World(l) => (l, "world"),
+            VerifyLight::Record(l) => (l, "record"),
+        };
         let mut lr = LightReport {
             light,
+            space,
             silhouette_instances: 0,
             side_quads: 0,
             caps: 0,
@@ -622,6 +668,7 @@ pub fn verify(
             time_ms: 0.0,
         };
         for ((d, index), pts) in decoded.iter().zip(&indexes).zip(&points) {
+            let light = given.in_record_space(d);
             let ev = evaluate(d, light, strategy);
             let c = check_closedness(d, light, &ev);
             lr.orientation_errors += orientation_errors(d, light, &ev);

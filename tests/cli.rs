@@ -132,9 +132,9 @@ fn inspect_rejects_damaged_files() {
     };
     // A header whose checksum is right but whose sections lie: one more
     // instance in the first bucket than the payload holds.
-    let lying_header = {
+    let with_header = |f: &dyn Fn(&mut svpack::format::Header)| {
         let mut h = svpack::format::read_file(&good).unwrap().header;
-        h.meshes[0].buckets[0].instances += 1;
+        f(&mut h);
         let hb = bincode::serde::encode_to_vec(&h, bincode::config::legacy()).unwrap();
         assert_eq!(hb.len(), hlen);
         let mut b = bytes.clone();
@@ -142,6 +142,11 @@ fn inspect_rejects_damaged_files() {
         b[24..24 + hlen].copy_from_slice(&hb);
         b
     };
+    let lying_header = with_header(&|h| h.meshes[0].buckets[0].instances += 1);
+    // Valid checksums, but an encoding this version does not know, and a
+    // record-space scale of zero (no inverse).
+    let unknown_encoding = with_header(&|h| h.options.positions = 7);
+    let zero_scale = with_header(&|h| h.meshes[0].position_scale[1] = 0.0);
     let last = bytes.len() - 5;
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("empty", Vec::new(), "truncated"),
@@ -160,8 +165,13 @@ fn inspect_rejects_damaged_files() {
         ("magic", patched(&|b| b[0] = b'X'), "bad magic"),
         (
             "version",
-            patched(&|b| b[8] = 2),
-            "unsupported format version 2.0",
+            patched(&|b| b[8] = 3),
+            "unsupported format version 3.0",
+        ),
+        (
+            "version_1",
+            patched(&|b| b[8] = 1),
+            "unsupported format version 1.0",
         ),
         ("header_bit", patched(&|b| b[30] ^= 1), "header checksum"),
         (
@@ -170,6 +180,12 @@ fn inspect_rejects_damaged_files() {
             "payload checksum",
         ),
         ("lying_header", lying_header, "bucket k=2"),
+        (
+            "unknown_encoding",
+            unknown_encoding,
+            "unknown position encoding 7",
+        ),
+        ("zero_scale", zero_scale, "position transform"),
         (
             "zstd_junk",
             [0x28, 0xB5, 0x2F, 0xFD]

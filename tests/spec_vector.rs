@@ -69,6 +69,7 @@ fn decode_per_spec(file: &[u8]) -> Vec<String> {
     kv("input.sha256", sha);
     kv("options.max_mult", c.u32().to_string());
     kv("options.compress", c.u8().to_string());
+    kv("options.positions", c.u8().to_string());
     kv("bounds_min", c.f32x3());
     kv("bounds_max", c.f32x3());
     let meshes = c.u64();
@@ -79,6 +80,8 @@ fn decode_per_spec(file: &[u8]) -> Vec<String> {
         kv(&format!("{p}.name"), format!("{:?}", c.string()));
         kv(&format!("{p}.bounds_min"), c.f32x3());
         kv(&format!("{p}.bounds_max"), c.f32x3());
+        kv(&format!("{p}.position_offset"), c.f32x3());
+        kv(&format!("{p}.position_scale"), c.f32x3());
         for f in [
             "primitives",
             "input_triangles",

@@ -9,8 +9,8 @@ attribute vec4 aP0;
 attribute vec4 aP1;
 attribute vec4 aP2;
 
-uniform mat4 uViewProj;  // world -> clip, infinite far plane
-uniform vec4 uLight;     // world space; w = 1 point, w = 0 directional
+uniform mat4 uViewProj;  // record space -> clip (projection * view * model, spec 4.5), infinite far plane
+uniform vec4 uLight;     // record space (spec 4.5); w = 1 point, w = 0 directional
 
 void main() {
     vec3 p0 = aP0.xyz;

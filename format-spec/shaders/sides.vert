@@ -46,8 +46,8 @@ attribute vec4 aO11;
 attribute vec4 aO12;
 #endif
 
-uniform mat4 uViewProj;  // world -> clip, infinite far plane
-uniform vec4 uLight;     // world space; w = 1 point, w = 0 directional
+uniform mat4 uViewProj;  // record space -> clip (projection * view * model, spec 4.5), infinite far plane
+uniform vec4 uLight;     // record space (spec 4.5); w = 1 point, w = 0 directional
 uniform float uSide;     // side index s of this draw, 0 .. k-1
 
 void main() {

@@ -1,0 +1,247 @@
+//! Per-stage throughput of the build pipeline, one criterion group per stage,
+//! on real meshes (../shared/meshes when present) and a generated scene, all
+//! reported per input triangle:
+//!
+//! - `load/ours/*`: file read + OBJ/glTF decode through `svpack::load::load`;
+//! - `check/ours/*`: `build::check_soup` (indices in range, finite positions);
+//! - `weld/ours/*`: `weld::weld`;
+//! - `topology/ours/*`: `topology::build_edges` (edges and all opposite
+//!   vertices), `topology/edge_stats/*`, and the peer in the same group,
+//!   `topology/meshopt_adjacency/*`: meshoptimizer's adjacency index buffer
+//!   (`meshopt::generate_adjacency_indices`) on the same welded positions
+//!   and indices;
+//! - `layout/ours/*`: `layout::layout` (side buckets and caps, K = 5);
+//! - `write/memory/*` and `write/file/*`: container serialisation
+//!   (`format::encode_to` into a Vec, `format::write_file` to a temp file);
+//! - `evaluate/reference_1t/*`: the CPU evaluator (reference strategy, one
+//!   light, every side bucket and the caps) inside a 1-thread rayon pool;
+//! - `weld+topology+layout/ours/*`: `build::build_soup` from the loaded soup,
+//!   against `weld+topology+layout/meshopt_adjacency/*`: meshoptimizer's
+//!   adjacency from the same unwelded soup (it does its own position
+//!   matching), i.e. "soup in, adjacency out" for both.
+//!
+//! `cargo bench --bench stages -- --warm-up-time 1 --measurement-time 3`;
+//! a filter such as `topology/` runs one group.
+
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, Throughput, criterion_group, criterion_main};
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use svpack::build::{BuildConfig, build_file, build_soup, check_soup};
+use svpack::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
+use svpack::format::{self, MeshPayload};
+use svpack::layout::{self, DEFAULT_MAX_MULT, Layout};
+use svpack::load::{self, Soup};
+use svpack::topology::{self, Edges};
+use svpack::weld::{self, Welded};
+
+#[path = "../examples/scene.rs"]
+mod scene;
+
+/// Triangles of the generated scene.
+const SCENE_TRIANGLES: u64 = 1_000_000;
+
+/// One input, loaded and run through every stage once, so each benchmark
+/// gets the previous stage's output.
+struct Mesh {
+    name: String,
+    path: PathBuf,
+    soup: Soup,
+    welded: Welded,
+    edges: Edges,
+    layout: Layout,
+    header: format::Header,
+    /// Triangles in the loaded soup (the throughput unit everywhere).
+    triangles: u64,
+}
+
+fn prepare(name: &str, path: &Path, scratch: &Path) -> Mesh {
+    let soup = load::load(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    check_soup(path, &soup).unwrap();
+    let welded = weld::weld(&soup.positions, &soup.indices);
+    let edges = topology::build_edges(&welded.triangles, welded.positions.len());
+    let layout = layout::layout(&welded, &edges, DEFAULT_MAX_MULT);
+    // The header exactly as a default build writes it, so the write stage
+    // serialises the same container as `svpack build`.
+    let out = build_file(
+        path,
+        &scratch.join(format!("{name}.svpk")),
+        &BuildConfig::default(),
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let triangles = soup.triangle_count() as u64;
+    eprintln!(
+        "{name}: {triangles} triangles, {} soup vertices -> {} welded vertices, {} kept triangles, {} edges, {} side instances, {} bytes",
+        soup.positions.len(),
+        welded.positions.len(),
+        welded.triangle_count(),
+        edges.len(),
+        layout.edge_instances(),
+        out.file_bytes
+    );
+    Mesh {
+        name: name.to_string(),
+        path: path.to_path_buf(),
+        soup,
+        welded,
+        edges,
+        layout,
+        header: out.header,
+        triangles,
+    }
+}
+
+fn group<'a>(c: &'a mut Criterion, stage: &str, m: &Mesh) -> BenchmarkGroup<'a, WallTime> {
+    let mut g = c.benchmark_group(stage);
+    g.throughput(Throughput::Elements(m.triangles));
+    // Criterion's default 100 samples take minutes on the large inputs.
+    g.sample_size(if m.triangles > 50_000 { 10 } else { 30 });
+    g
+}
+
+fn payload(m: &Mesh) -> MeshPayload<'_> {
+    MeshPayload {
+        header: m.header.meshes[0].clone(),
+        caps: &m.layout.caps,
+        buckets: m.layout.buckets.iter().map(|b| b.data.as_slice()).collect(),
+    }
+}
+
+fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
+    let adapter = meshopt::VertexDataAdapter::new(
+        meshopt::typed_to_bytes(positions),
+        std::mem::size_of::<[f32; 3]>(),
+        0,
+    )
+    .unwrap();
+    meshopt::generate_adjacency_indices(indices, &adapter)
+}
+
+fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
+    let n = &m.name;
+
+    let mut g = group(c, "load", m);
+    g.bench_function(format!("ours/{n}"), |b| {
+        b.iter(|| load::load(black_box(&m.path)).unwrap())
+    });
+    g.finish();
+
+    let mut g = group(c, "check", m);
+    g.bench_function(format!("ours/{n}"), |b| {
+        b.iter(|| check_soup(&m.path, black_box(&m.soup)).unwrap())
+    });
+    g.finish();
+
+    let mut g = group(c, "weld", m);
+    g.bench_function(format!("ours/{n}"), |b| {
+        b.iter(|| weld::weld(black_box(&m.soup.positions), black_box(&m.soup.indices)))
+    });
+    g.finish();
+
+    let mut g = group(c, "topology", m);
+    g.bench_function(format!("ours/{n}"), |b| {
+        b.iter(|| topology::build_edges(black_box(&m.welded.triangles), m.welded.positions.len()))
+    });
+    g.bench_function(format!("edge_stats/{n}"), |b| {
+        b.iter(|| topology::edge_stats(black_box(&m.edges)))
+    });
+    g.bench_function(format!("meshopt_adjacency/{n}"), |b| {
+        b.iter(|| {
+            meshopt_adjacency(
+                black_box(&m.welded.positions),
+                black_box(&m.welded.triangles),
+            )
+        })
+    });
+    g.finish();
+
+    let mut g = group(c, "layout", m);
+    g.bench_function(format!("ours/{n}"), |b| {
+        b.iter(|| layout::layout(black_box(&m.welded), black_box(&m.edges), DEFAULT_MAX_MULT))
+    });
+    g.finish();
+
+    let mut g = group(c, "write", m);
+    let mut buf = Vec::new();
+    g.bench_function(format!("memory/{n}"), |b| {
+        b.iter(|| {
+            buf.clear();
+            format::encode_to(&mut buf, m.header.clone(), &[payload(m)]).unwrap();
+            buf.len()
+        })
+    });
+    let out = scratch.join(format!("{n}.write.svpk"));
+    g.bench_function(format!("file/{n}"), |b| {
+        b.iter(|| format::write_file(&out, m.header.clone(), &[payload(m)], false).unwrap())
+    });
+    g.finish();
+
+    let light = [3.0, 2.5, 4.0, 1.0];
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let mut g = group(c, "evaluate", m);
+    g.bench_function(format!("reference_1t/{n}"), |b| {
+        let mut sides: Vec<Vec<i8>> = m
+            .layout
+            .buckets
+            .iter()
+            .map(|x| vec![0; x.instances as usize])
+            .collect();
+        let mut caps = vec![0i8; m.layout.caps.len() / 12];
+        b.iter(|| {
+            pool.install(|| {
+                for (bk, o) in m.layout.buckets.iter().zip(sides.iter_mut()) {
+                    side_multiplicities_with(
+                        Strategy::Reference,
+                        bk.k as usize,
+                        &bk.data,
+                        light,
+                        o,
+                    );
+                }
+                cap_signs_with(Strategy::Reference, &m.layout.caps, light, &mut caps);
+            })
+        })
+    });
+    g.finish();
+
+    let mut g = group(c, "weld+topology+layout", m);
+    g.bench_function(format!("ours/{n}"), |b| {
+        b.iter(|| build_soup(black_box(&m.soup), DEFAULT_MAX_MULT))
+    });
+    g.bench_function(format!("meshopt_adjacency/{n}"), |b| {
+        b.iter(|| meshopt_adjacency(black_box(&m.soup.positions), black_box(&m.soup.indices)))
+    });
+    g.finish();
+}
+
+fn stages(c: &mut Criterion) {
+    let scratch = tempfile::tempdir().unwrap();
+    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
+    let mut inputs: Vec<(String, PathBuf)> = Vec::new();
+    for (name, rel) in [
+        ("dragon_res4", "obj/dragon_vrip_res4.obj"),
+        ("armadillo", "obj/armadillo.obj"),
+        ("2CylinderEngine", "gltf/2CylinderEngine.glb"),
+    ] {
+        let p = shared.join(rel);
+        if p.exists() {
+            inputs.push((name.into(), p));
+        } else {
+            eprintln!("skipping {name}: {} is absent", p.display());
+        }
+    }
+    let scene = scratch.path().join("scene_1m.obj");
+    let file = std::fs::File::create(&scene).unwrap();
+    scene::write_scene(std::io::BufWriter::new(file), SCENE_TRIANGLES).unwrap();
+    inputs.push(("scene_1m".into(), scene));
+    for (name, path) in &inputs {
+        let m = prepare(name, path, scratch.path());
+        bench_mesh(c, &m, scratch.path());
+    }
+}
+
+criterion_group!(benches, stages);
+criterion_main!(benches);
