@@ -3,6 +3,9 @@
 //! light plane as the peer, on a real model (stanford-bunny from
 //! ../shared/meshes when present) and a generated sphere.
 //!
+//! Also the shared evaluator `verify` uses (triangles once, sides as sums of
+//! their signs), per side record.
+//!
 //! `cargo bench --bench evaluate`; criterion reports time per element.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -45,6 +48,34 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             b.iter(|| pool.install(|| cap_signs_with(strategy, &d.caps_data, light, &mut o)))
         });
     }
+    // The evaluator `verify` uses: each triangle's sign once (caps), then
+    // every side record as a signed sum of its triangles' signs; per light,
+    // caps + sides. Reported per side record (edge instance), so it reads
+    // against sides/reference + caps/reference above.
+    g.throughput(Throughput::Elements(records as u64));
+    g.bench_function("caps+sides/reference_shared", |b| {
+        b.iter(|| pool.install(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
+    });
+    g.bench_function("sides_given_caps/reference_shared", |b| {
+        let caps = svpack::verify::evaluate(&d, light, Strategy::Reference).caps;
+        let mut outs: Vec<Vec<i8>> = d.buckets.iter().map(|x| vec![0; x.records()]).collect();
+        b.iter(|| {
+            pool.install(|| {
+                for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
+                    svpack::evaluate::side_multiplicities_shared(
+                        Strategy::Reference,
+                        bk.k,
+                        &bk.data,
+                        &bk.slot_tri,
+                        &bk.slot_parity,
+                        &caps,
+                        light,
+                        o,
+                    );
+                }
+            })
+        })
+    });
     g.finish();
 }
 

@@ -49,6 +49,35 @@ pub struct Built {
     pub warnings: Vec<String>,
 }
 
+/// Wall time of each build stage, in milliseconds (`build --timings`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Timings {
+    /// Reading and parsing the input (OBJ or glTF), and checking it.
+    pub load: f64,
+    /// Quantising (unorm16 only) and welding.
+    pub weld: f64,
+    /// Edges and opposite vertices, and their statistics.
+    pub topology: f64,
+    /// Buckets, splitting, sides and caps buffers.
+    pub layout: f64,
+    /// Encoding and writing the file (and compressing it with `--compress`).
+    pub write: f64,
+    /// The whole build.
+    pub total: f64,
+}
+
+/// Peak resident memory of this process so far, in bytes (Linux:
+/// `VmHWM` of /proc/self/status; `None` elsewhere).
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// A stage reported to a progress callback: its name, as it starts.
+pub type StageCallback<'a> = &'a (dyn Fn(&'static str) + Sync);
+
 /// Result of [`build_file`].
 #[derive(Debug, Clone)]
 pub struct BuildOutput {
@@ -58,6 +87,8 @@ pub struct BuildOutput {
     pub file_bytes: u64,
     /// Wall time of the whole build.
     pub elapsed: Duration,
+    /// Wall time per stage.
+    pub timings: Timings,
     /// Loader warnings.
     pub warnings: Vec<String>,
 }
@@ -110,10 +141,31 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
 
 /// Runs weld, topology and layout on a checked soup.
 pub fn build_soup(soup: &Soup, max_mult: u32) -> Built {
+    build_soup_timed(soup, max_mult, &mut Timings::default(), &|_| {})
+}
+
+/// [`build_soup`], adding each stage's wall time to `t` and announcing each
+/// stage to `stage` as it starts.
+pub fn build_soup_timed(
+    soup: &Soup,
+    max_mult: u32,
+    t: &mut Timings,
+    stage: StageCallback<'_>,
+) -> Built {
+    let ms = |i: Instant| i.elapsed().as_secs_f64() * 1e3;
+    stage("weld");
+    let i = Instant::now();
     let welded = weld::weld(&soup.positions, &soup.indices);
+    t.weld += ms(i);
+    stage("topology");
+    let i = Instant::now();
     let edges = topology::build_edges(&welded.triangles, welded.positions.len());
     let es = topology::edge_stats(&edges);
+    t.topology += ms(i);
+    stage("layout");
+    let i = Instant::now();
     let layout = layout::layout(&welded, &edges, max_mult);
+    t.layout += ms(i);
     let stats = MeshStats {
         primitives: soup.stats.primitives,
         input_triangles: soup.triangle_count() as u64,
@@ -167,6 +219,17 @@ fn file_name(path: &Path) -> String {
 
 /// Builds `input` into the file `output`.
 pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<BuildOutput> {
+    build_file_with(input, output, cfg, &|_| {})
+}
+
+/// [`build_file`], announcing each stage ("load", "weld", "topology",
+/// "layout", "write") to `stage` as it starts (for progress display).
+pub fn build_file_with(
+    input: &Path,
+    output: &Path,
+    cfg: &BuildConfig,
+    stage: StageCallback<'_>,
+) -> Result<BuildOutput> {
     if cfg.max_mult == 0 || cfg.max_mult > MAX_MAX_MULT {
         return Err(Error::Other(format!(
             "--max-mult must be between 1 and {MAX_MAX_MULT} (got {})",
@@ -174,6 +237,9 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
         )));
     }
     let start = Instant::now();
+    let ms = |i: Instant| i.elapsed().as_secs_f64() * 1e3;
+    let mut timings = Timings::default();
+    stage("load");
     let data = load::read_file(input)?;
     let fmt = load::detect_format(input, &data)?;
     let mut soup = match fmt {
@@ -181,6 +247,8 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
         load::Format::Obj => load::obj::load_obj(input, data)?,
     };
     check_soup(input, &soup)?;
+    timings.load = ms(start);
+    let quantise_start = Instant::now();
     // Quantising comes before welding (see `quantize`): positions that share a
     // code weld together and collapsed triangles count as degenerate.
     let (space, world_bounds) = match cfg.positions {
@@ -193,7 +261,8 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
     if cfg.positions != Encoding::F32 {
         soup.positions = quantize::to_record_space(&soup.positions, &space, cfg.positions);
     }
-    let built = build_soup(&soup, cfg.max_mult);
+    timings.weld = ms(quantise_start);
+    let built = build_soup_timed(&soup, cfg.max_mult, &mut timings, stage);
     if built.stats.triangles == 0 {
         return Err(Error::input(
             input,
@@ -267,11 +336,16 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
         bounds_max: bmax,
         meshes: Vec::new(),
     };
+    stage("write");
+    let write_start = Instant::now();
     let (header, file_bytes) = format::write_file(output, header, &[mesh], cfg.compress)?;
+    timings.write = ms(write_start);
+    timings.total = ms(start);
     Ok(BuildOutput {
         header,
         file_bytes,
         elapsed: start.elapsed(),
+        timings,
         warnings: built.warnings,
     })
 }
@@ -320,13 +394,31 @@ pub fn build_batch(
     cfg: &BuildConfig,
     jobs: usize,
 ) -> Vec<Result<BuildOutput>> {
+    build_batch_with(inputs, outputs, cfg, jobs, &|_, _| {}, &|_| {})
+}
+
+/// [`build_batch`], announcing each input's stages to `stage(input index,
+/// stage name)` and each finished input to `done`.
+pub fn build_batch_with(
+    inputs: &[std::path::PathBuf],
+    outputs: &[std::path::PathBuf],
+    cfg: &BuildConfig,
+    jobs: usize,
+    stage: &(dyn Fn(usize, &'static str) + Sync),
+    done: &(dyn Fn(usize) + Sync),
+) -> Vec<Result<BuildOutput>> {
     use rayon::prelude::*;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build();
     let run = || {
         inputs
             .par_iter()
             .zip(outputs)
-            .map(|(i, o)| build_file(i, o, cfg))
+            .enumerate()
+            .map(|(n, (i, o))| {
+                let r = build_file_with(i, o, cfg, &|s| stage(n, s));
+                done(n);
+                r
+            })
             .collect()
     };
     match pool {

@@ -6,7 +6,7 @@
 //! the float contract in [`crate::multiplicity`]. Work is split over records
 //! with rayon; results do not depend on the thread count.
 
-use crate::multiplicity::{Light, sort3, tri_sign};
+use crate::multiplicity::{Light, ref_sign, sort3, tri_sign};
 
 /// How multiplicities and cap orientations are computed. Only
 /// [`Strategy::Reference`] is the format's contract (what the shaders do);
@@ -77,6 +77,41 @@ impl Strategy {
             Strategy::Exact => exact_sign(p0, p1, p2, l),
         }
     }
+}
+
+/// [`tri_sign`]`(a, b, o, l)` for a side record, where the file guarantees
+/// `a < b`: O's place among the sorted corners takes two comparisons instead
+/// of the three-comparator network, and the corners are chosen without
+/// branches (O's position is data-dependent and mispredicts). The float
+/// expression evaluated is [`ref_sign`] on the same sorted corners, so the
+/// result is bit-for-bit the contract's; when `a < b` does not hold (a
+/// corrupt record) it falls back to [`tri_sign`] itself, which is what the
+/// shader computes.
+#[inline(always)]
+pub fn reference_side_sign(a: [f32; 3], b: [f32; 3], o: [f32; 3], l: Light) -> i32 {
+    if !lex_less_nb(a, b) {
+        return tri_sign(a, b, o, l);
+    }
+    let before = lex_less_nb(o, a); // (O, A, B): even
+    let after = lex_less_nb(b, o); // (A, B, O): even; otherwise (A, O, B): odd
+    let r0 = if before { o } else { a };
+    let r2 = if after { o } else { b };
+    let r1 = if before {
+        a
+    } else if after {
+        b
+    } else {
+        o
+    };
+    let parity = if before | after { 1 } else { -1 };
+    parity * ref_sign(r0, r1, r2, l)
+}
+
+/// [`crate::multiplicity::lex_less`] without short-circuit evaluation, so
+/// the compiler can use flag arithmetic instead of branches.
+#[inline(always)]
+fn lex_less_nb(a: [f32; 3], b: [f32; 3]) -> bool {
+    (a[0] < b[0]) | ((a[0] == b[0]) & ((a[1] < b[1]) | ((a[1] == b[1]) & (a[2] < b[2]))))
 }
 
 /// Pečiva 2013: Kim's test on all three edges of the triangle in one fixed
@@ -193,7 +228,7 @@ pub fn side_multiplicities_with(
     match strategy {
         Strategy::Kim => sides_loop(kim_sign, k, data, light, out),
         Strategy::Peciva => sides_loop(peciva_sign, k, data, light, out),
-        Strategy::Reference => sides_loop(tri_sign, k, data, light, out),
+        Strategy::Reference => sides_loop(reference_side_sign, k, data, light, out),
         Strategy::ReferenceF64 => sides_loop(tri_sign_f64, k, data, light, out),
         Strategy::Exact => sides_loop(exact_sign, k, data, light, out),
     }
@@ -214,6 +249,50 @@ where
                 let mut sum = 0i32;
                 for j in 0..k {
                     sum += sign(a, b, xyz(r, 8 + 4 * j), light);
+                }
+                *m = sum as i8;
+            }
+        });
+}
+
+/// Side multiplicities from already evaluated cap signs: slot j of a record
+/// contributes `slot_parity[j] · caps[slot_tri[j]]`, or is evaluated directly
+/// with `strategy` when `slot_tri[j]` is `u32::MAX`. Exact for every
+/// consistent strategy (not Kim's), see `verify::DecodedBucket::slot_parity`.
+#[allow(clippy::too_many_arguments)]
+pub fn side_multiplicities_shared(
+    strategy: Strategy,
+    k: usize,
+    data: &[f32],
+    slot_tri: &[u32],
+    slot_parity: &[i8],
+    caps: &[i8],
+    light: Light,
+    out: &mut [i8],
+) {
+    let stride = (2 + k) * 4;
+    assert_eq!(data.len(), out.len() * stride, "bucket size mismatch");
+    assert_eq!(slot_tri.len(), out.len() * k, "slot table size mismatch");
+    out.par_chunks_mut(CHUNK)
+        .zip(data.par_chunks(CHUNK * stride))
+        .zip(
+            slot_tri
+                .par_chunks(CHUNK * k)
+                .zip(slot_parity.par_chunks(CHUNK * k)),
+        )
+        .for_each(|((o, d), (tri, par))| {
+            for (((m, r), t), p) in o
+                .iter_mut()
+                .zip(d.chunks_exact(stride))
+                .zip(tri.chunks_exact(k))
+                .zip(par.chunks_exact(k))
+            {
+                let mut sum = 0i32;
+                for j in 0..k {
+                    sum += match caps.get(t[j] as usize) {
+                        Some(&c) => p[j] as i32 * c as i32,
+                        None => strategy.side_sign(xyz(r, 0), xyz(r, 4), xyz(r, 8 + 4 * j), light),
+                    };
                 }
                 *m = sum as i8;
             }
@@ -375,5 +454,28 @@ mod tests {
             }
         }
         assert!(found > 0, "no disagreeing configuration found");
+    }
+
+    #[test]
+    fn fast_side_sign_is_the_contract_bit_for_bit() {
+        // Coordinates from a tiny lattice make ties in x and y (the hard part
+        // of the lexicographic order) and lights in planes common.
+        let mut seed = 99u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for _ in 0..200_000 {
+            let mut lattice = || [0, 1, 2].map(|_| ((next() % 3) as f32) * 0.5 - 0.5);
+            let (a, b, o) = (lattice(), lattice(), lattice());
+            let lp = lattice();
+            let w = (next() % 2) as f32;
+            let l = [lp[0] * 3.0 + 0.25, lp[1], lp[2] * 7.0, w];
+            // Both orders of a, b: the fallback path must agree too.
+            assert_eq!(reference_side_sign(a, b, o, l), tri_sign(a, b, o, l));
+            assert_eq!(reference_side_sign(b, a, o, l), tri_sign(b, a, o, l));
+        }
     }
 }

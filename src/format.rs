@@ -308,6 +308,13 @@ pub struct MeshPayload<'a> {
 /// next multiple of [`ALIGN`], through a small buffer. Unorm16 stores `xyz`
 /// as the codes of their record-space values and `w` as a saturated integer.
 fn write_records<W: Write>(out: &mut W, floats: &[f32], enc: Encoding) -> std::io::Result<()> {
+    // f32 on a little-endian machine: the memory already is the file's bytes.
+    if enc == Encoding::F32 && cfg!(target_endian = "little") {
+        let bytes: &[u8] = bytemuck::cast_slice(floats);
+        out.write_all(bytes)?;
+        let n = bytes.len() as u64;
+        return out.write_all(&[0u8; 16][..(align_up(n) - n) as usize]);
+    }
     let mut buf = [0u8; 1 << 16];
     let mut written = 0u64;
     for chunk in floats.chunks(buf.len() / 4) {

@@ -10,12 +10,91 @@ use svpack::build::BuildConfig;
 use svpack::layout::{DEFAULT_MAX_MULT, MAX_MAX_MULT};
 use svpack::report::Summary;
 
+/// Progress bars on stderr (indicatif hides them when stderr is not a terminal).
+mod progress {
+    use indicatif::{ProgressBar, ProgressStyle};
+    use std::path::{Path, PathBuf};
+    use std::time::Duration;
+
+    /// Inputs this large (about a million triangles of OBJ) get a bar of their own.
+    const LARGE_INPUT: u64 = 16 << 20;
+
+    /// A bar for a build: one step per input, the current stage as message.
+    pub struct Bar(Option<ProgressBar>);
+
+    pub fn for_build(inputs: &[PathBuf], quiet: bool) -> Bar {
+        let large = inputs.iter().any(|p| {
+            std::fs::metadata(p)
+                .map(|m| m.len() >= LARGE_INPUT)
+                .unwrap_or(false)
+        });
+        if quiet || (inputs.len() < 2 && !large) {
+            return Bar(None);
+        }
+        let pb = ProgressBar::new(inputs.len() as u64);
+        pb.set_style(
+            ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {wide_msg}",
+            )
+            .expect("valid template"),
+        );
+        pb.enable_steady_tick(Duration::from_millis(120));
+        Bar(Some(pb))
+    }
+
+    impl Bar {
+        pub fn stage(&self, input: &Path, stage: &str) {
+            if let Some(pb) = &self.0 {
+                let name = input
+                    .file_name()
+                    .map(|n| n.to_string_lossy())
+                    .unwrap_or_default();
+                pb.set_message(format!("{name}: {stage}"));
+            }
+        }
+        pub fn done_one(&self) {
+            if let Some(pb) = &self.0 {
+                pb.inc(1);
+            }
+        }
+        pub fn finish(&self) {
+            if let Some(pb) = &self.0 {
+                pb.finish_and_clear();
+            }
+        }
+    }
+
+    /// A bar over the lights of `verify` for large files.
+    pub fn for_lights(lights: usize, triangles: u64, quiet: bool) -> Option<ProgressBar> {
+        if quiet || triangles < 1_000_000 {
+            return None;
+        }
+        let pb = ProgressBar::new(lights as u64);
+        pb.set_style(
+            ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} lights",
+            )
+            .expect("valid template"),
+        );
+        Some(pb)
+    }
+}
+
 /// Silhouette shadow-volume geometry for WebGL 1 (Milet et al. 2015).
 #[derive(Parser)]
 #[command(name = "svpack", version, about, long_about = None)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Worker threads for everything that runs in parallel (builds of
+    /// several inputs, the evaluator, verify, bench); 0 = one per core.
+    /// Outputs are byte-identical whatever the value.
+    #[arg(long, global = true, default_value_t = 0)]
+    threads: usize,
+    /// No progress bars. (They are shown on stderr only when it is a
+    /// terminal, for several inputs or an input of 16 MiB or more.)
+    #[arg(long, short, global = true)]
+    quiet: bool,
 }
 
 #[derive(Subcommand)]
@@ -59,6 +138,11 @@ enum Command {
         /// After writing, run `verify` on the output (exit 2 if it fails).
         #[arg(long)]
         verify: bool,
+        /// Add per-stage wall times (load, weld, topology, layout, write,
+        /// total) and peak memory to the summary (`timings_ms`,
+        /// `peak_memory_bytes` in JSON).
+        #[arg(long)]
+        timings: bool,
         #[command(flatten)]
         lights: LightArgs,
     },
@@ -188,6 +272,7 @@ fn run_verify(
     file: &std::path::Path,
     args: &LightArgs,
     json: bool,
+    quiet: bool,
 ) -> Result<bool, svpack::error::Error> {
     let f = svpack::format::read_file(file)?;
     use svpack::verify::VerifyLight;
@@ -220,7 +305,16 @@ fn run_verify(
         EvaluatorArg::ReferenceF64 => Strategy::ReferenceF64,
         EvaluatorArg::Exact => Strategy::Exact,
     };
-    let rep = svpack::verify::verify(&f, &lights, strategy, args.samples);
+    let triangles = f.header.meshes.iter().map(|m| m.caps.count).sum();
+    let bar = progress::for_lights(lights.len(), triangles, quiet);
+    let rep = svpack::verify::verify_with(&f, &lights, strategy, args.samples, &|| {
+        if let Some(b) = &bar {
+            b.inc(1)
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
     if json {
         println!(
             "{}",
@@ -402,6 +496,14 @@ fn run_lint(
 }
 
 fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
+    if cli.threads > 0 {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(cli.threads)
+            .build_global()
+            .map_err(|e| {
+                svpack::error::Error::Other(format!("cannot start {} threads: {e}", cli.threads))
+            })?;
+    }
     match cli.command {
         Command::Build {
             inputs,
@@ -412,6 +514,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             positions,
             json,
             verify,
+            timings,
             lights,
         } => {
             let cfg = BuildConfig {
@@ -430,7 +533,17 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             } else {
                 vec![output.clone()]
             };
-            let results = svpack::build::build_batch(&inputs, &outputs, &cfg, jobs);
+            let jobs = if jobs == 0 { cli.threads } else { jobs };
+            let bar = progress::for_build(&inputs, cli.quiet);
+            let results = svpack::build::build_batch_with(
+                &inputs,
+                &outputs,
+                &cfg,
+                jobs,
+                &|n, stage| bar.stage(&inputs[n], stage),
+                &|_| bar.done_one(),
+            );
+            bar.finish();
             let mut failures = Vec::new();
             let mut json_items = Vec::new();
             let mut verify_failed = false;
@@ -442,6 +555,10 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                         }
                         let mut s = Summary::from_header(&out.header, out.file_bytes, compress);
                         s.time_ms = Some(out.elapsed.as_secs_f64() * 1e3);
+                        if timings {
+                            s.timings_ms = Some(out.timings);
+                            s.peak_memory_bytes = svpack::build::peak_memory_bytes();
+                        }
                         s.warnings = out.warnings;
                         if json && batch {
                             json_items.push(serde_json::json!({
@@ -453,7 +570,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                             }
                             print_summary(&s, json);
                         }
-                        if verify && !run_verify(output, &lights, json && !batch)? {
+                        if verify && !run_verify(output, &lights, json && !batch, cli.quiet)? {
                             verify_failed = true;
                         }
                     }
@@ -569,7 +686,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             }
         }
         Command::Verify { file, json, lights } => {
-            if !run_verify(&file, &lights, json)? {
+            if !run_verify(&file, &lights, json, cli.quiet)? {
                 return Ok(Outcome::ValidationFailed);
             }
         }
@@ -578,6 +695,14 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
 }
 
 fn main() -> ExitCode {
+    // `svpack … | head` must end quietly like any Unix tool, not panic in
+    // println! when the reader goes away: restore the default SIGPIPE action
+    // (Rust ignores the signal and turns it into an error).
+    #[cfg(unix)]
+    // SAFETY: called first thing in main, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

@@ -92,6 +92,13 @@ pub struct Summary {
     /// Build wall time in milliseconds (build only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_ms: Option<f64>,
+    /// Wall time per stage (`build --timings`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timings_ms: Option<crate::build::Timings>,
+    /// Peak resident memory of the process in bytes (`build --timings`; for a
+    /// batch, of the whole batch so far).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub peak_memory_bytes: Option<u64>,
     /// Loader warnings (build only).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
@@ -175,6 +182,8 @@ impl Summary {
             bounds_min: h.bounds_min,
             bounds_max: h.bounds_max,
             time_ms: None,
+            timings_ms: None,
+            peak_memory_bytes: None,
             warnings: Vec::new(),
         }
     }
@@ -260,6 +269,22 @@ impl Summary {
         );
         if let Some(ms) = self.time_ms {
             let _ = write!(o, "; {ms:.1} ms");
+        }
+        if let Some(t) = &self.timings_ms {
+            let _ = write!(
+                o,
+                "\ntimings: load {:.1} ms, weld {:.1} ms, topology {:.1} ms, layout {:.1} ms, write {:.1} ms; total {:.1} ms ({:.0} ns per input triangle)",
+                t.load,
+                t.weld,
+                t.topology,
+                t.layout,
+                t.write,
+                t.total,
+                t.total * 1e6 / self.stats.input_triangles.max(1) as f64
+            );
+            if let Some(peak) = self.peak_memory_bytes {
+                let _ = write!(o, "; peak memory {}", human_bytes(peak));
+            }
         }
         let _ = write!(
             o,

@@ -117,7 +117,8 @@ pub fn weld(positions: &[[f32; 3]], indices: &[u32]) -> Welded {
         .filter(|(i, _)| used[*i])
         .map(|(i, &p)| (position_key(p), i as u32))
         .collect();
-    order.sort_unstable_by_key(|e| e.0);
+    // Keys are distinct, so the parallel sort is deterministic.
+    rayon::slice::ParallelSliceMut::par_sort_unstable_by_key(&mut order[..], |e| e.0);
     let mut rank = vec![u32::MAX; unique.len()];
     let mut out_positions = Vec::with_capacity(order.len());
     for (r, &(_, i)) in order.iter().enumerate() {
