@@ -2,7 +2,9 @@
 //! on real meshes (../shared/meshes when present) and a generated scene, all
 //! reported per input triangle:
 //!
-//! - `load/ours/*`: file read + OBJ/glTF decode through `svpack::load::load`;
+//! - `load/ours/*`: file read + OBJ/glTF decode through `svpack::load::load`,
+//!   and for OBJ the peer `load/tobj/*`: file read + `tobj::load_obj_buf` with
+//!   the options our loader uses (our overhead = ours / tobj − 1);
 //! - `check/ours/*`: `build::check_soup` (indices in range, finite positions);
 //! - `weld/ours/*`: `weld::weld`;
 //! - `topology/ours/*`: `topology::build_edges` (edges and all opposite
@@ -124,6 +126,23 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     g.bench_function(format!("ours/{n}"), |b| {
         b.iter(|| load::load(black_box(&m.path)).unwrap())
     });
+    // The parser alone, as our OBJ loader calls it (same options), so
+    // ours/tobj is our overhead on top of the parser.
+    if m.path.extension().is_some_and(|e| e == "obj") {
+        g.bench_function(format!("tobj/{n}"), |b| {
+            b.iter(|| {
+                let text = std::fs::read(black_box(&m.path)).unwrap();
+                let options = tobj::LoadOptions {
+                    single_index: false,
+                    triangulate: false,
+                    ignore_points: false,
+                    ignore_lines: false,
+                };
+                let mut reader = text.as_slice();
+                tobj::load_obj_buf(&mut reader, &options, |_| Ok(Default::default())).unwrap()
+            })
+        });
+    }
     g.finish();
 
     let mut g = group(c, "check", m);

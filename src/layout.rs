@@ -77,8 +77,18 @@ pub fn split(n: u32, max_mult: u32) -> (u32, u32) {
     (n / max_mult, n % max_mult)
 }
 
+/// Edges per parallel block of the fill pass: large enough that the per-block
+/// bookkeeping (one counter per bucket) costs nothing.
+const BLOCK: usize = 1 << 14;
+
 /// Builds the sides and caps buffers. `max_mult` must be in `1..=MAX_MAX_MULT`.
+///
+/// Records go to their bucket in edge order. The fill is parallel but the
+/// output is not thread-dependent: edges are cut into fixed blocks, each
+/// block's record count per bucket is known beforehand, so every block
+/// writes its own precomputed range of every bucket.
 pub fn layout(welded: &Welded, edges: &Edges, max_mult: u32) -> Layout {
+    use rayon::prelude::*;
     assert!(
         (1..=MAX_MAX_MULT).contains(&max_mult),
         "max_mult out of range"
@@ -86,43 +96,77 @@ pub fn layout(welded: &Welded, edges: &Edges, max_mult: u32) -> Layout {
     let k_max = max_mult as usize;
     let pos = &welded.positions;
 
-    // Pass 1: instances per bucket.
+    // Pass 1: instances per bucket, per block of edges.
+    let blocks = edges.len().div_ceil(BLOCK);
+    let block_counts: Vec<Vec<u64>> = (0..blocks)
+        .into_par_iter()
+        .map(|blk| {
+            let mut counts = vec![0u64; k_max + 1];
+            for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+                let (full, rem) = split(edges.fan(e) as u32, max_mult);
+                counts[k_max] += full as u64;
+                if rem > 0 {
+                    counts[rem as usize] += 1;
+                }
+            }
+            counts
+        })
+        .collect();
     let mut counts = vec![0u64; k_max + 1];
-    for e in 0..edges.len() {
-        let (full, rem) = split(edges.fan(e) as u32, max_mult);
-        counts[k_max] += full as u64;
-        if rem > 0 {
-            counts[rem as usize] += 1;
+    for c in &block_counts {
+        for k in 0..=k_max {
+            counts[k] += c[k];
         }
     }
     let mut data: Vec<Vec<f32>> = (0..=k_max)
-        .map(|k| Vec::with_capacity(counts[k] as usize * (2 + k) * 4))
+        .map(|k| vec![0.0; counts[k] as usize * (2 + k) * 4])
         .collect();
 
-    // Pass 2: fill, edge order, chunks in order.
-    for e in 0..edges.len() {
-        let a = pos[edges.a[e] as usize];
-        let b = pos[edges.b[e] as usize];
-        let opp = edges.opposites(e);
-        let n = opp.len() as f32;
-        for chunk in opp.chunks(k_max) {
-            let out = &mut data[chunk.len()];
-            out.extend_from_slice(&[a[0], a[1], a[2], chunk.len() as f32]);
-            out.extend_from_slice(&[b[0], b[1], b[2], n]);
-            for &o in chunk {
-                let o = pos[o as usize];
-                out.extend_from_slice(&[o[0], o[1], o[2], 1.0]);
+    // Pass 2: cut every bucket into the blocks' ranges, then fill in parallel.
+    let mut per_block: Vec<Vec<&mut [f32]>> = (0..blocks).map(|_| Vec::new()).collect();
+    for (k, bucket) in data.iter_mut().enumerate() {
+        let mut rest: &mut [f32] = bucket;
+        for (blk, c) in block_counts.iter().enumerate() {
+            let (mine, tail) = rest.split_at_mut(c[k] as usize * (2 + k) * 4);
+            per_block[blk].push(mine);
+            rest = tail;
+        }
+    }
+    per_block
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(blk, mut outs)| {
+            let mut at = vec![0usize; k_max + 1];
+            for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+                let a = pos[edges.a[e] as usize];
+                let b = pos[edges.b[e] as usize];
+                let opp = edges.opposites(e);
+                let n = opp.len() as f32;
+                for chunk in opp.chunks(k_max) {
+                    let k = chunk.len();
+                    let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
+                    at[k] += (2 + k) * 4;
+                    out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
+                    out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
+                    for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
+                        let o = pos[o as usize];
+                        slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
+                    }
+                }
             }
-        }
-    }
+        });
 
-    let mut caps = Vec::with_capacity(welded.triangles.len() * 4);
-    for c in welded.triangles.chunks_exact(3) {
-        for &v in c {
-            let p = pos[v as usize];
-            caps.extend_from_slice(&[p[0], p[1], p[2], 1.0]);
-        }
-    }
+    let mut caps = vec![0.0f32; welded.triangles.len() * 4];
+    caps.par_chunks_mut(12 * BLOCK)
+        .zip(welded.triangles.par_chunks(3 * BLOCK))
+        .for_each(|(out, tris)| {
+            for (rec, c) in out.chunks_exact_mut(12).zip(tris.chunks_exact(3)) {
+                for (slot, &v) in rec.chunks_exact_mut(4).zip(c) {
+                    let p = pos[v as usize];
+                    slot.copy_from_slice(&[p[0], p[1], p[2], 1.0]);
+                }
+            }
+        });
 
     let buckets = data
         .into_iter()

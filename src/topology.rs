@@ -95,44 +95,111 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
     }
     drop(fill);
 
-    let mut edges = Edges {
-        a: Vec::with_capacity(half_edges / 2 + 1),
-        b: Vec::with_capacity(half_edges / 2 + 1),
-        opp_start: Vec::with_capacity(half_edges / 2 + 2),
-        opp: Vec::with_capacity(half_edges),
-        opp_tri: Vec::with_capacity(half_edges),
-    };
-    edges.opp_start.push(0);
-    for a in 0..vertex_count {
-        let bucket = &mut recs[start[a] as usize..start[a + 1] as usize];
-        // Records were filled in triangle order; a stable sort by `b` keeps
-        // triangle order within each edge.
-        if bucket.len() <= 16 {
-            for i in 1..bucket.len() {
-                let mut j = i;
-                while j > 0 && bucket[j - 1].b > bucket[j].b {
-                    bucket.swap(j - 1, j);
-                    j -= 1;
+    // Per smaller endpoint: sort its records by larger endpoint, then emit
+    // one edge per distinct larger endpoint. Vertices are cut into fixed
+    // blocks that run in parallel: each block sorts its own records (disjoint
+    // slices), counts its edges, and after a prefix sum writes them into its
+    // own ranges of the output, so the result does not depend on threads.
+    use rayon::prelude::*;
+    let blocks = vertex_count.div_ceil(VERTEX_BLOCK);
+    let mut rec_blocks: Vec<&mut [Rec]> = Vec::with_capacity(blocks);
+    let mut rest: &mut [Rec] = &mut recs;
+    for blk in 0..blocks {
+        let (lo, hi) = (
+            blk * VERTEX_BLOCK,
+            ((blk + 1) * VERTEX_BLOCK).min(vertex_count),
+        );
+        let (mine, tail) = rest.split_at_mut((start[hi] - start[lo]) as usize);
+        rec_blocks.push(mine);
+        rest = tail;
+    }
+    let edge_counts: Vec<usize> = rec_blocks
+        .par_iter_mut()
+        .enumerate()
+        .map(|(blk, recs)| {
+            let base = start[blk * VERTEX_BLOCK];
+            let hi = ((blk + 1) * VERTEX_BLOCK).min(vertex_count);
+            let mut count = 0;
+            for a in blk * VERTEX_BLOCK..hi {
+                let bucket = &mut recs[(start[a] - base) as usize..(start[a + 1] - base) as usize];
+                // Records were filled in triangle order; a stable sort by `b`
+                // keeps triangle order within each edge.
+                if bucket.len() <= 16 {
+                    for i in 1..bucket.len() {
+                        let mut j = i;
+                        while j > 0 && bucket[j - 1].b > bucket[j].b {
+                            bucket.swap(j - 1, j);
+                            j -= 1;
+                        }
+                    }
+                } else {
+                    bucket.sort_by_key(|r| r.b);
                 }
+                count += bucket
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, r)| *i == 0 || bucket[i - 1].b != r.b)
+                    .count();
             }
-        } else {
-            bucket.sort_by_key(|r| r.b);
-        }
-        let mut i = 0;
-        while i < bucket.len() {
-            let b = bucket[i].b;
-            while i < bucket.len() && bucket[i].b == b {
-                edges.opp.push(bucket[i].opp);
-                edges.opp_tri.push(bucket[i].tri);
-                i += 1;
-            }
-            edges.a.push(a as u32);
-            edges.b.push(b);
-            edges.opp_start.push(edges.opp.len() as u32);
+            count
+        })
+        .collect();
+    let edge_total: usize = edge_counts.iter().sum();
+    let mut edges = Edges {
+        a: vec![0; edge_total],
+        b: vec![0; edge_total],
+        opp_start: vec![0; edge_total + 1],
+        opp: vec![0; half_edges],
+        opp_tri: vec![0; half_edges],
+    };
+    // Cut the outputs into the blocks' ranges.
+    let mut outs = Vec::with_capacity(blocks);
+    {
+        let (mut ra, mut rb) = (&mut edges.a[..], &mut edges.b[..]);
+        let mut rs = &mut edges.opp_start[1..];
+        let (mut ro, mut rt) = (&mut edges.opp[..], &mut edges.opp_tri[..]);
+        for (blk, &n) in edge_counts.iter().enumerate() {
+            let m = (start[((blk + 1) * VERTEX_BLOCK).min(vertex_count)]
+                - start[blk * VERTEX_BLOCK]) as usize;
+            let (a1, a2) = ra.split_at_mut(n);
+            let (b1, b2) = rb.split_at_mut(n);
+            let (s1, s2) = rs.split_at_mut(n);
+            let (o1, o2) = ro.split_at_mut(m);
+            let (t1, t2) = rt.split_at_mut(m);
+            outs.push((a1, b1, s1, o1, t1));
+            (ra, rb, rs, ro, rt) = (a2, b2, s2, o2, t2);
         }
     }
+    outs.into_par_iter()
+        .zip(rec_blocks.into_par_iter())
+        .enumerate()
+        .for_each(|(blk, ((oa, ob, os, oo, ot), recs))| {
+            let base = start[blk * VERTEX_BLOCK];
+            let hi = ((blk + 1) * VERTEX_BLOCK).min(vertex_count);
+            let mut e = 0;
+            for a in blk * VERTEX_BLOCK..hi {
+                let (lo, up) = ((start[a] - base) as usize, (start[a + 1] - base) as usize);
+                let mut i = lo;
+                while i < up {
+                    let b = recs[i].b;
+                    while i < up && recs[i].b == b {
+                        oo[i] = recs[i].opp;
+                        ot[i] = recs[i].tri;
+                        i += 1;
+                    }
+                    oa[e] = a as u32;
+                    ob[e] = b;
+                    // Opposite ranges are global positions in `opp`.
+                    os[e] = base + i as u32;
+                    e += 1;
+                }
+            }
+        });
     edges
 }
+
+/// Vertices per parallel block of the edge pass.
+const VERTEX_BLOCK: usize = 1 << 14;
 
 /// Edge statistics for summaries.
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -230,3 +230,65 @@ fn human_summary_mentions_the_essentials() {
         .code(0)
         .stdout(predicate::str::contains("max fan 12"));
 }
+
+/// `--timings` adds per-stage wall times and peak memory; `--threads` does
+/// not change a byte of the output; progress bars never reach a stderr that is
+/// not a terminal.
+#[test]
+fn timings_threads_and_quiet_progress() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let input = &fx.iter().find(|f| f.0 == "fan12.obj").unwrap().1;
+    let mut files = Vec::new();
+    for threads in ["1", "2"] {
+        let out = tmp.path().join(format!("t{threads}.svpk"));
+        let o = svpack()
+            .args(["build", "--timings", "--json", "--threads", threads, "-o"])
+            .arg(&out)
+            .arg(input)
+            .assert()
+            .code(0)
+            .get_output()
+            .clone();
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let t = &v["timings_ms"];
+        let stages: f64 = ["load", "weld", "topology", "layout", "write"]
+            .iter()
+            .map(|k| {
+                t[k].as_f64()
+                    .unwrap_or_else(|| panic!("timings_ms.{k}: {t}"))
+            })
+            .sum();
+        let total = t["total"].as_f64().unwrap();
+        assert!(stages <= total * 1.0001 + 1e-3, "{stages} > {total}");
+        assert!(v["peak_memory_bytes"].as_u64().unwrap() > 1 << 20);
+        assert!(
+            o.stderr.is_empty(),
+            "stderr: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert_eq!(files[0], files[1]);
+    // Without --timings the fields are absent.
+    let o = svpack()
+        .args(["build", "--json", "-o"])
+        .arg(tmp.path().join("plain.svpk"))
+        .arg(input)
+        .assert()
+        .code(0)
+        .get_output()
+        .stdout
+        .clone();
+    let v: serde_json::Value = serde_json::from_slice(&o).unwrap();
+    assert!(v.get("timings_ms").is_none() && v.get("peak_memory_bytes").is_none());
+    // A batch (which would show a bar on a terminal) writes nothing to a piped stderr.
+    let inputs: Vec<_> = fx.iter().map(|f| f.1.clone()).collect();
+    svpack()
+        .args(["build", "-o"])
+        .arg(tmp.path().join("batch"))
+        .args(&inputs)
+        .assert()
+        .code(0)
+        .stderr(predicate::str::is_empty());
+}
