@@ -371,13 +371,7 @@ mod tests {
     fn consistent_strategies_agree_under_every_corner_order() {
         // Near-parallel lights: Kim's three expressions can disagree here, but
         // Pečiva, f64 and exact evaluate one canonical expression per triangle.
-        let mut seed = 777u64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = crate::multiplicity::test_rng(777);
         let perms = [
             [0, 1, 2],
             [1, 2, 0],
@@ -425,13 +419,7 @@ mod tests {
     fn peciva_discards_a_triangle_whose_edge_tests_disagree() {
         // Search a near-parallel configuration where Kim's three edge tests
         // disagree; Pečiva must give 0 there, and Kim's own edges must differ.
-        let mut seed = 4242u64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = crate::multiplicity::test_rng(4242);
         let mut found = 0;
         for _ in 0..200_000 {
             // Corners and light (nearly) on the tilted plane z = 0.1x + 0.37y.

@@ -155,6 +155,18 @@ pub fn cap_corner(v: u32, c: i32) -> (u32, bool) {
     (corner, at_infinity)
 }
 
+/// Xorshift generator of f32 in [-1, 1) for the unit tests here and in
+/// `evaluate` (fixed seeds, so failures reproduce).
+#[cfg(test)]
+pub(crate) fn test_rng(mut seed: u64) -> impl FnMut() -> f32 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -185,13 +197,7 @@ mod tests {
     fn permutations_agree_exactly_even_near_the_plane() {
         // A light almost in the triangle's plane: the per-edge light plane of
         // Kim 2008 can disagree between edges here; the reference edge cannot.
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = test_rng(12345);
         for _ in 0..20000 {
             let t = [
                 [rnd(), rnd(), rnd() * 1e-6],

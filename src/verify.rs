@@ -327,31 +327,34 @@ pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
     if strategy == Strategy::Kim {
         return evaluate_per_record(d, light, strategy);
     }
-    let mut caps = vec![0i8; d.caps.len()];
-    cap_signs_with(strategy, &d.caps_data, light, &mut caps);
-    let sides = d
-        .buckets
-        .iter()
-        .map(|b| {
-            let mut m = vec![0i8; b.records()];
-            crate::evaluate::side_multiplicities_shared(
-                strategy,
-                b.k,
-                &b.data,
-                &b.slot_tri,
-                &b.slot_parity,
-                &caps,
-                light,
-                &mut m,
-            );
-            m
-        })
-        .collect();
-    Evaluation { caps, sides }
+    evaluate_sides(d, light, strategy, |b, caps, m| {
+        crate::evaluate::side_multiplicities_shared(
+            strategy,
+            b.k,
+            &b.data,
+            &b.slot_tri,
+            &b.slot_parity,
+            caps,
+            light,
+            m,
+        )
+    })
 }
 
 /// [`evaluate`] record by record, exactly as the shaders do it.
 pub fn evaluate_per_record(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
+    evaluate_sides(d, light, strategy, |b, _, m| {
+        side_multiplicities_with(strategy, b.k, &b.data, light, m)
+    })
+}
+
+/// Cap signs, then every bucket's multiplicities through `sides(bucket, caps, out)`.
+fn evaluate_sides(
+    d: &Decoded,
+    light: Light,
+    strategy: Strategy,
+    sides: impl Fn(&DecodedBucket, &[i8], &mut [i8]),
+) -> Evaluation {
     let mut caps = vec![0i8; d.caps.len()];
     cap_signs_with(strategy, &d.caps_data, light, &mut caps);
     let sides = d
@@ -359,7 +362,7 @@ pub fn evaluate_per_record(d: &Decoded, light: Light, strategy: Strategy) -> Eva
         .iter()
         .map(|b| {
             let mut m = vec![0i8; b.records()];
-            side_multiplicities_with(strategy, b.k, &b.data, light, &mut m);
+            sides(b, &caps, &mut m);
             m
         })
         .collect();

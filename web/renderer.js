@@ -374,17 +374,7 @@ export class ShadowRenderer {
    */
   render(view, colors) {
     const gl = this.gl;
-    gl.viewport(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight);
-    gl.clearColor(...(colors?.background || [0.12, 0.13, 0.16, 1]));
-    gl.clearDepth(1);
-    gl.clearStencil(0);
-    gl.depthMask(true);
-    gl.colorMask(true, true, true, true);
-    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT | gl.STENCIL_BUFFER_BIT);
-    gl.disable(gl.BLEND);
-    gl.disable(gl.STENCIL_TEST);
-    gl.enable(gl.DEPTH_TEST);
-    gl.depthFunc(gl.LESS);
+    this.beginFrame(colors?.background || [0.12, 0.13, 0.16, 1]);
     this.drawScene(view, 1, colors);
     this.stencilPass(view);
     // Lit pass: only where no triangle lies between the point and the light.
@@ -401,16 +391,13 @@ export class ShadowRenderer {
     gl.depthMask(true);
   }
 
-  /**
-   * Test/debug frame whose pixels encode, per pixel: R = 255 model, 128
-   * ground, 0 nothing; G = 255 where stencil != 0 (shadow); B = the stencil
-   * value itself (mod 256). Read it back with readPixels.
-   */
-  renderStencilImage(view) {
+  /** Clears colour (to `background`), depth and stencil; depth test LESS, no blending. */
+  beginFrame(background) {
     const gl = this.gl;
     gl.viewport(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight);
-    gl.clearColor(0, 0, 0, 0);
+    gl.clearColor(...background);
     gl.clearDepth(1);
+    gl.clearStencil(0);
     gl.depthMask(true);
     gl.colorMask(true, true, true, true);
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT | gl.STENCIL_BUFFER_BIT);
@@ -418,6 +405,16 @@ export class ShadowRenderer {
     gl.disable(gl.STENCIL_TEST);
     gl.enable(gl.DEPTH_TEST);
     gl.depthFunc(gl.LESS);
+  }
+
+  /**
+   * Test/debug frame whose pixels encode, per pixel: R = 255 model, 128
+   * ground, 0 nothing; G = 255 where stencil != 0 (shadow); B = the stencil
+   * value itself (mod 256). Read it back with readPixels.
+   */
+  renderStencilImage(view) {
+    const gl = this.gl;
+    this.beginFrame([0, 0, 0, 0]);
     this.drawScene(view, 0, { model: [1, 0, 0], ground: [128 / 255, 0, 0] });
     this.stencilPass(view);
     const q = this.quad;
