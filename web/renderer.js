@@ -147,8 +147,8 @@ function program(gl, vs, fs, attribs, label) {
 // ---------------------------------------------------------------- renderer
 
 /**
- * Per-mesh record space -> world transform (format 2: world = offset +
- * record * scale per axis; format 1: identity).
+ * Per-mesh record space -> world transform: world = offset + record * scale
+ * per axis (format-spec §4.5; the identity for f32 files).
  */
 function modelMatrix(mesh) {
   const o = mesh.positionOffset;
@@ -159,8 +159,8 @@ function modelMatrix(mesh) {
 /**
  * The light in a mesh's record space, in f32, the way the CPU evaluator
  * must compute it too: a point light is moved by the inverse of the
- * mesh transform, a direction is only scaled. For format 1 (identity) this
- * is the world light unchanged.
+ * mesh transform, a direction is only scaled. For f32 files (identity
+ * transform) this is the world light unchanged.
  */
 export function recordLight(mesh, light) {
   const o = mesh.positionOffset;
