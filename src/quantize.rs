@@ -79,14 +79,6 @@ impl RecordSpace {
     pub fn point_to_record(&self, p: [f32; 3]) -> [f32; 3] {
         [0, 1, 2].map(|k| ((p[k] as f64 - self.offset[k] as f64) / self.scale[k] as f64) as f32)
     }
-
-    /// Column-major 4×4 matrix of the record → world map (for renderers).
-    pub fn matrix(&self) -> [f32; 16] {
-        let (o, s) = (self.offset, self.scale);
-        [
-            s[0], 0.0, 0.0, 0.0, 0.0, s[1], 0.0, 0.0, 0.0, 0.0, s[2], 0.0, o[0], o[1], o[2], 1.0,
-        ]
-    }
 }
 
 /// Unorm16 code of a world coordinate on one axis of `space`.
