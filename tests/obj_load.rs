@@ -6,6 +6,9 @@
 //! counts `f` corners and resolves indices itself) and from independent
 //! geometry (shoelace areas, point-in-polygon), never from the loader.
 
+mod common;
+
+use common::{cross, dot, sub};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use svpack::load::Soup;
@@ -64,19 +67,6 @@ fn tri(soup: &Soup, t: usize) -> [[f64; 3]; 3] {
     [p(0), p(1), p(2)]
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
 }
