@@ -6,16 +6,30 @@
 //! Also the shared evaluator `verify` uses (triangles once, sides as sums of
 //! their signs), per side record.
 //!
-//! `cargo bench --bench evaluate`; criterion reports time per element.
+//! `reference` is the vectorised kernel (`svpack::evaluate_simd`, what
+//! `Strategy::Reference` runs); `reference_scalar` is the scalar, branching
+//! loop it replaced, kept in the same run so the two read against each other
+//! on the same machine state (the results are bit for bit equal; the
+//! library's tests check that).
+//!
+//! `cargo bench --bench evaluate -- --warm-up-time 1 --measurement-time 3`;
+//! criterion reports time per element: per side record for `sides/*` and
+//! `caps+sides/*`, per triangle for `caps/*`.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::path::Path;
 use svpack::build::{BuildConfig, build_file};
-use svpack::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
+use svpack::evaluate::{
+    Strategy, cap_signs_scalar, cap_signs_with, side_multiplicities_scalar,
+    side_multiplicities_shared, side_multiplicities_shared_scalar, side_multiplicities_with,
+};
 
 #[path = "../examples/sphere.rs"]
 mod sphere;
 use sphere::sphere_obj;
+
+/// Signature of `side_multiplicities_shared` and its scalar peer.
+type SharedFn = fn(Strategy, usize, &[f32], &[u32], &[i8], &[i8], [f32; 4], &mut [i8]);
 
 fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     let dir = tempfile::tempdir().unwrap();
@@ -30,14 +44,36 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
         .unwrap();
     let records: usize = d.buckets.iter().map(|b| b.records()).sum();
     let mut g = c.benchmark_group(format!("evaluate/{name}"));
-    for (label, strategy) in [("reference", Strategy::Reference), ("kim", Strategy::Kim)] {
+    type SidesFn = fn(Strategy, usize, &[f32], [f32; 4], &mut [i8]);
+    type CapsFn = fn(Strategy, &[f32], [f32; 4], &mut [i8]);
+    let runs: [(&str, Strategy, SidesFn, CapsFn); 3] = [
+        (
+            "reference",
+            Strategy::Reference,
+            side_multiplicities_with,
+            cap_signs_with,
+        ),
+        (
+            "reference_scalar",
+            Strategy::Reference,
+            side_multiplicities_scalar,
+            cap_signs_scalar,
+        ),
+        (
+            "kim",
+            Strategy::Kim,
+            side_multiplicities_with,
+            cap_signs_with,
+        ),
+    ];
+    for (label, strategy, sides, caps) in runs {
         g.throughput(Throughput::Elements(records as u64));
         g.bench_function(format!("sides/{label}"), |b| {
             let mut outs: Vec<Vec<i8>> = d.buckets.iter().map(|x| vec![0; x.records()]).collect();
             b.iter(|| {
                 pool.install(|| {
                     for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
-                        side_multiplicities_with(strategy, bk.k, &bk.data, light, o);
+                        sides(strategy, bk.k, &bk.data, light, o);
                     }
                 })
             })
@@ -45,37 +81,71 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
         g.throughput(Throughput::Elements(d.caps.len() as u64));
         g.bench_function(format!("caps/{label}"), |b| {
             let mut o = vec![0i8; d.caps.len()];
-            b.iter(|| pool.install(|| cap_signs_with(strategy, &d.caps_data, light, &mut o)))
+            b.iter(|| pool.install(|| caps(strategy, &d.caps_data, light, &mut o)))
         });
     }
     // The evaluator `verify` uses: each triangle's sign once (caps), then
     // every side record as a signed sum of its triangles' signs; per light,
     // caps + sides. Reported per side record (edge instance), so it reads
-    // against sides/reference + caps/reference above.
+    // against sides/reference + caps/reference above. `_scalar` is the same
+    // computation through the loops it had before the vectorised kernel and
+    // gather (scalar caps, one checked `caps.get` per slot).
     g.throughput(Throughput::Elements(records as u64));
     g.bench_function("caps+sides/reference_shared", |b| {
         b.iter(|| pool.install(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
     });
-    g.bench_function("sides_given_caps/reference_shared", |b| {
-        let caps = svpack::verify::evaluate(&d, light, Strategy::Reference).caps;
-        let mut outs: Vec<Vec<i8>> = d.buckets.iter().map(|x| vec![0; x.records()]).collect();
+    g.bench_function("caps+sides/reference_shared_scalar", |b| {
         b.iter(|| {
             pool.install(|| {
-                for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
-                    svpack::evaluate::side_multiplicities_shared(
-                        Strategy::Reference,
-                        bk.k,
-                        &bk.data,
-                        &bk.slot_tri,
-                        &bk.slot_parity,
-                        &caps,
-                        light,
-                        o,
-                    );
-                }
+                let mut caps = vec![0i8; d.caps.len()];
+                cap_signs_scalar(Strategy::Reference, &d.caps_data, light, &mut caps);
+                let sides: Vec<Vec<i8>> = d
+                    .buckets
+                    .iter()
+                    .map(|bk| {
+                        let mut m = vec![0i8; bk.records()];
+                        side_multiplicities_shared_scalar(
+                            Strategy::Reference,
+                            bk.k,
+                            &bk.data,
+                            &bk.slot_tri,
+                            &bk.slot_parity,
+                            &caps,
+                            light,
+                            &mut m,
+                        );
+                        m
+                    })
+                    .collect();
+                (caps, sides)
             })
         })
     });
+    let caps = svpack::verify::evaluate(&d, light, Strategy::Reference).caps;
+    for (label, shared) in [
+        ("reference_shared", side_multiplicities_shared as SharedFn),
+        ("reference_shared_scalar", side_multiplicities_shared_scalar),
+    ] {
+        g.bench_function(format!("sides_given_caps/{label}"), |b| {
+            let mut outs: Vec<Vec<i8>> = d.buckets.iter().map(|x| vec![0; x.records()]).collect();
+            b.iter(|| {
+                pool.install(|| {
+                    for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
+                        shared(
+                            Strategy::Reference,
+                            bk.k,
+                            &bk.data,
+                            &bk.slot_tri,
+                            &bk.slot_parity,
+                            &caps,
+                            light,
+                            o,
+                        );
+                    }
+                })
+            })
+        });
+    }
     g.finish();
 }
 

@@ -2,9 +2,16 @@
 //! file's own buffers (format-spec/multiplicity.md), for one light at a time.
 //!
 //! It reads the sides and caps records exactly as the GPU does (flat f32
-//! arrays, one record after another) and calls the single implementation of
-//! the float contract in [`crate::multiplicity`]. Work is split over records
-//! with rayon; results do not depend on the thread count.
+//! arrays, one record after another). [`Strategy::Reference`], the format's
+//! contract, runs the branch-free kernels of [`crate::evaluate_simd`]: the
+//! same float expression as [`crate::multiplicity`], operation for
+//! operation, vectorised over records because the scalar version's corner
+//! sort mispredicts about once per triangle (that, not the arithmetic, was
+//! its cost). The scalar loops stay as `*_scalar` functions: the peers in
+//! `benches/evaluate.rs` and the oracle the tests compare the kernels with,
+//! bit for bit. Work is split over fixed chunks of records with rayon, and
+//! every record's result depends on that record alone, so results do not
+//! depend on the thread count.
 
 use crate::multiplicity::{Light, ref_sign, sort3, tri_sign};
 
@@ -217,7 +224,32 @@ pub fn side_multiplicities(k: usize, data: &[f32], light: Light, out: &mut [i8])
 }
 
 /// [`side_multiplicities`] with an explicit strategy.
+///
+/// [`Strategy::Reference`] runs the branch-free vectorised kernel of
+/// [`crate::evaluate_simd`] (bit for bit the contract, tested there); the
+/// other strategies, and [`side_multiplicities_scalar`], run the scalar loop.
 pub fn side_multiplicities_with(
+    strategy: Strategy,
+    k: usize,
+    data: &[f32],
+    light: Light,
+    out: &mut [i8],
+) {
+    if strategy == Strategy::Reference {
+        let stride = (2 + k) * 4;
+        assert_eq!(data.len(), out.len() * stride, "bucket size mismatch");
+        out.par_chunks_mut(CHUNK)
+            .zip(data.par_chunks(CHUNK * stride))
+            .for_each(|(o, d)| crate::evaluate_simd::side_multiplicities(k, d, light, o));
+        return;
+    }
+    side_multiplicities_scalar(strategy, k, data, light, out)
+}
+
+/// [`side_multiplicities_with`] through the scalar per-record loop for every
+/// strategy, [`Strategy::Reference`] included: the evaluator as it was before
+/// the vectorised kernel, kept as the benchmark's peer and the tests' oracle.
+pub fn side_multiplicities_scalar(
     strategy: Strategy,
     k: usize,
     data: &[f32],
@@ -259,8 +291,60 @@ where
 /// contributes `slot_parity[j] · caps[slot_tri[j]]`, or is evaluated directly
 /// with `strategy` when `slot_tri[j]` is `u32::MAX`. Exact for every
 /// consistent strategy (not Kim's), see `verify::DecodedBucket::slot_parity`.
+///
+/// A chunk of records whose slots all name a triangle (every chunk of an
+/// intact file) runs the branch-free gather of
+/// [`crate::evaluate_simd::try_sides_from_caps`]; only a chunk with an
+/// unknown slot takes the per-slot fallback, so the check costs one pass
+/// over the slot indices instead of a branch per slot.
 #[allow(clippy::too_many_arguments)]
 pub fn side_multiplicities_shared(
+    strategy: Strategy,
+    k: usize,
+    data: &[f32],
+    slot_tri: &[u32],
+    slot_parity: &[i8],
+    caps: &[i8],
+    light: Light,
+    out: &mut [i8],
+) {
+    let stride = (2 + k) * 4;
+    assert_eq!(data.len(), out.len() * stride, "bucket size mismatch");
+    assert_eq!(slot_tri.len(), out.len() * k, "slot table size mismatch");
+    assert_eq!(slot_parity.len(), out.len() * k, "slot table size mismatch");
+    out.par_chunks_mut(CHUNK)
+        .zip(data.par_chunks(CHUNK * stride))
+        .zip(
+            slot_tri
+                .par_chunks(CHUNK * k)
+                .zip(slot_parity.par_chunks(CHUNK * k)),
+        )
+        .for_each(|((o, d), (tri, par))| {
+            if crate::evaluate_simd::try_sides_from_caps(k, tri, par, caps, o) {
+                return;
+            }
+            for (((m, r), t), p) in o
+                .iter_mut()
+                .zip(d.chunks_exact(stride))
+                .zip(tri.chunks_exact(k))
+                .zip(par.chunks_exact(k))
+            {
+                let mut sum = 0i32;
+                for j in 0..k {
+                    sum += match caps.get(t[j] as usize) {
+                        Some(&c) => p[j] as i32 * c as i32,
+                        None => strategy.side_sign(xyz(r, 0), xyz(r, 4), xyz(r, 8 + 4 * j), light),
+                    };
+                }
+                *m = sum as i8;
+            }
+        });
+}
+
+/// [`side_multiplicities_shared`] as it was before the vectorised gather:
+/// one `caps.get` per slot. The benchmark's peer and the tests' oracle.
+#[allow(clippy::too_many_arguments)]
+pub fn side_multiplicities_shared_scalar(
     strategy: Strategy,
     k: usize,
     data: &[f32],
@@ -305,7 +389,25 @@ pub fn cap_signs(data: &[f32], light: Light, out: &mut [i8]) {
 }
 
 /// [`cap_signs`] with an explicit strategy.
+///
+/// [`Strategy::Reference`] runs the branch-free vectorised kernel of
+/// [`crate::evaluate_simd`] (bit for bit the contract, tested there); the
+/// other strategies, and [`cap_signs_scalar`], run the scalar loop.
 pub fn cap_signs_with(strategy: Strategy, data: &[f32], light: Light, out: &mut [i8]) {
+    if strategy == Strategy::Reference {
+        assert_eq!(data.len(), out.len() * 12, "caps size mismatch");
+        out.par_chunks_mut(CHUNK)
+            .zip(data.par_chunks(CHUNK * 12))
+            .for_each(|(o, d)| crate::evaluate_simd::cap_signs(d, light, o));
+        return;
+    }
+    cap_signs_scalar(strategy, data, light, out)
+}
+
+/// [`cap_signs_with`] through the scalar loop for every strategy,
+/// [`Strategy::Reference`] included (branchy `tri_sign`): the benchmark's
+/// peer and the tests' oracle.
+pub fn cap_signs_scalar(strategy: Strategy, data: &[f32], light: Light, out: &mut [i8]) {
     match strategy {
         Strategy::Kim => caps_loop(kim_cap_sign, data, light, out),
         Strategy::Peciva => caps_loop(peciva_sign, data, light, out),
@@ -442,6 +544,92 @@ mod tests {
             }
         }
         assert!(found > 0, "no disagreeing configuration found");
+    }
+
+    #[test]
+    fn vectorised_paths_equal_the_scalar_loops_whatever_the_thread_count() {
+        // More records than one rayon chunk (so chunk boundaries and a tail
+        // block occur), lattice coordinates for ties, a light on a corner,
+        // in a plane and directional; one slot with no triangle (a damaged
+        // file) in the middle chunk, which must take the per-slot fallback.
+        let mut rnd = crate::multiplicity::test_rng(2024);
+        let mut coord = move || {
+            let v = rnd();
+            if v < -0.3 { (v * 4.0).round() * 0.5 } else { v }
+        };
+        let n_tri = 2 * CHUNK + 13;
+        let caps_data: Vec<f32> = (0..n_tri * 3)
+            .flat_map(|_| [coord(), coord(), coord(), 1.0])
+            .collect();
+        let k = 3;
+        let n_rec = 3 * CHUNK + 5;
+        let mut data = Vec::new();
+        let mut slot_tri = Vec::new();
+        let mut slot_parity = Vec::new();
+        let mut next = 7u64;
+        for _ in 0..n_rec {
+            for p in 0..2 + k {
+                data.extend_from_slice(&[coord(), coord(), coord(), if p < 2 { 3.0 } else { 1.0 }]);
+            }
+            for _ in 0..k {
+                next = next
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                slot_tri.push((next >> 33) as u32 % n_tri as u32);
+                slot_parity.push(((next >> 20) % 3) as i8 - 1);
+            }
+        }
+        slot_tri[CHUNK * k + 17] = u32::MAX;
+        let c0 = xyz(&caps_data, 0);
+        let lights = [
+            [0.3, -0.7, 0.25, 1.0],
+            [c0[0], c0[1], c0[2], 1.0],
+            [0.5, 0.0, -0.5, 0.0],
+            [1.0, 1.0, 1.0, 0.0],
+        ];
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                for l in lights {
+                    let (mut a, mut b) = (vec![0i8; n_tri], vec![0i8; n_tri]);
+                    cap_signs_with(Strategy::Reference, &caps_data, l, &mut a);
+                    cap_signs_scalar(Strategy::Reference, &caps_data, l, &mut b);
+                    assert_eq!(a, b, "caps, {threads} threads, {l:?}");
+                    let (mut a, mut b) = (vec![0i8; n_rec], vec![0i8; n_rec]);
+                    side_multiplicities_with(Strategy::Reference, k, &data, l, &mut a);
+                    side_multiplicities_scalar(Strategy::Reference, k, &data, l, &mut b);
+                    assert_eq!(a, b, "sides, {threads} threads, {l:?}");
+                    let caps = {
+                        let mut c = vec![0i8; n_tri];
+                        cap_signs_with(Strategy::Reference, &caps_data, l, &mut c);
+                        c
+                    };
+                    let (mut a, mut b) = (vec![0i8; n_rec], vec![0i8; n_rec]);
+                    for (f, o) in [
+                        (
+                            side_multiplicities_shared as fn(_, _, _, _, _, _, _, _),
+                            &mut a,
+                        ),
+                        (side_multiplicities_shared_scalar, &mut b),
+                    ] {
+                        f(
+                            Strategy::Reference,
+                            k,
+                            &data,
+                            &slot_tri,
+                            &slot_parity,
+                            &caps,
+                            l,
+                            o,
+                        );
+                    }
+                    assert_eq!(a, b, "shared sides, {threads} threads, {l:?}");
+                }
+            });
+        }
     }
 
     #[test]

@@ -5,6 +5,7 @@ pub mod accuracy;
 pub mod build;
 pub mod error;
 pub mod evaluate;
+pub mod evaluate_simd;
 pub mod exact;
 pub mod format;
 pub mod hardcases;

@@ -323,6 +323,12 @@ pub struct Evaluation {
 /// sides sum those signs: the same result as evaluating every record as the
 /// shader does ([`evaluate_per_record`]), about three times less arithmetic.
 /// Slots without a matching triangle (a damaged file) are evaluated directly.
+///
+/// For [`Strategy::Reference`] both halves are vectorised: the caps through
+/// [`crate::evaluate_simd::cap_signs`] (branch-free corner sort, 8 triangles
+/// per AVX2 instruction) and the sides through the bounds-check-free gather
+/// of [`crate::evaluate_simd::try_sides_from_caps`]; results are bit for bit
+/// those of the scalar loops (`crate::evaluate::*_scalar`).
 pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
     if strategy == Strategy::Kim {
         return evaluate_per_record(d, light, strategy);

@@ -1,0 +1,686 @@
+//! Vectorised kernels for [`Strategy::Reference`](crate::evaluate::Strategy),
+//! bit for bit the contract of format-spec/multiplicity.md.
+//!
+//! Why a second transcription of the contract: the scalar one
+//! ([`crate::multiplicity::tri_sign`]) sorts the corners with branches and
+//! leaves early when the light is on a corner. On a mesh the corner order is
+//! data-dependent, so those branches mispredict about once per triangle and
+//! cost more than the arithmetic; they also stop LLVM from vectorising. Here
+//! every step is written without control flow: the three-comparator network
+//! is three compare-and-select steps over the same comparisons
+//! ([`lex_less_nb`] is `lex_less` without short-circuit, equal on every
+//! input, NaN and ±0.0 included), the parity is the XOR of the three swap
+//! decisions, and the light-on-corner test is a mask applied at the end. The
+//! float expression is the contract's, operation by operation, in the same
+//! order: IEEE `+ − ×` are exact functions of their operands whether computed
+//! one at a time or eight per instruction, and Rust never contracts `a * b + c`
+//! into a fused multiply-add or reassociates a sum on its own. So each lane
+//! rounds exactly as the shaders and [`crate::multiplicity::ref_sign`] do.
+//!
+//! Each loop is compiled twice: plainly (SSE2 on x86-64, whatever the target
+//! has elsewhere) and with AVX2 (8 lanes), chosen at run time. The `fma`
+//! feature is deliberately not enabled: LLVM does not form FMAs without
+//! fast-math flags anyway, but keeping it off means no code path could round
+//! differently. The tests call both versions and compare them with the scalar
+//! contract on random and adversarial inputs.
+
+use crate::multiplicity::Light;
+
+/// `lex_less(a, b)` ([`crate::multiplicity::lex_less`]) with `&`/`|` instead
+/// of early returns, so it compiles to masks. Same truth table for every
+/// input: `a < b` and `a == b` are both false when either is NaN, exactly
+/// like the `!=` then `<` of the scalar version, and `-0.0 == 0.0` in both.
+#[inline(always)]
+fn lex_less_nb(a: [f32; 3], b: [f32; 3]) -> bool {
+    (a[0] < b[0]) | ((a[0] == b[0]) & ((a[1] < b[1]) | ((a[1] == b[1]) & (a[2] < b[2]))))
+}
+
+/// `if m { x } else { y }` per coordinate: a select (blend), never a branch.
+#[inline(always)]
+fn pick(m: bool, x: [f32; 3], y: [f32; 3]) -> [f32; 3] {
+    [
+        if m { x[0] } else { y[0] },
+        if m { x[1] } else { y[1] },
+        if m { x[2] } else { y[2] },
+    ]
+}
+
+/// [`crate::multiplicity::tri_sign`]`(p0, p1, p2, l)`, branch-free: the same
+/// three-comparator network (same comparisons, same tie handling, same
+/// parity) and the same float expression as `ref_sign`, operation for
+/// operation (format-spec/multiplicity.md §2, §3).
+#[inline(always)]
+pub fn tri_sign_nb(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
+    // sort3: each comparator swaps (a select of both corners) when the later
+    // corner is strictly smaller; every swap flips the parity.
+    let s0 = lex_less_nb(p1, p0);
+    let (a, b) = (pick(s0, p1, p0), pick(s0, p0, p1));
+    let s1 = lex_less_nb(p2, b);
+    let (b, c) = (pick(s1, p2, b), pick(s1, b, p2));
+    let s2 = lex_less_nb(b, a);
+    let (r0, r1) = (pick(s2, b, a), pick(s2, a, b));
+    let r2 = c;
+    let odd = s0 ^ s1 ^ s2;
+    // The point light exactly on a corner: 0 (spec §2). Which corner does not
+    // matter, so the unsorted corners are tested (no wait for the sort).
+    let lp = [l[0], l[1], l[2]];
+    let eq = |p: [f32; 3]| (p[0] == lp[0]) & (p[1] == lp[1]) & (p[2] == lp[2]);
+    let on_corner = (l[3] == 1.0) & (eq(p0) | eq(p1) | eq(p2));
+    // ref_sign's expression, in its order.
+    let x0 = r2[0] - r0[0];
+    let x1 = r2[1] - r0[1];
+    let x2 = r2[2] - r0[2];
+    let y0 = l[0] - r0[0] * l[3];
+    let y1 = l[1] - r0[1] * l[3];
+    let y2 = l[2] - r0[2] * l[3];
+    let d0 = r1[0] - r0[0];
+    let d1 = r1[1] - r0[1];
+    let d2 = r1[2] - r0[2];
+    let n0 = x1 * y2 - x2 * y1;
+    let n1 = x2 * y0 - x0 * y2;
+    let n2 = x0 * y1 - x1 * y0;
+    let s = (n0 * d0 + n1 * d1) + n2 * d2;
+    let sign = (s > 0.0) as i32 - (s < 0.0) as i32;
+    let sign = if odd { -sign } else { sign };
+    if on_corner { 0 } else { sign }
+}
+
+#[inline(always)]
+fn xyz(r: &[f32], at: usize) -> [f32; 3] {
+    [r[at], r[at + 1], r[at + 2]]
+}
+
+/// Records per block: one AVX2 vector of f32 lanes.
+pub const LANES: usize = 8;
+
+/// One corner of [`LANES`] triangles, structure of arrays: `[x, y, z][lane]`.
+type Corner = [[f32; LANES]; 3];
+
+/// Reads the corner at float offset `off` of [`LANES`] consecutive records
+/// of `stride` floats (each corner a vec4 `x, y, z, w`) into lanes.
+///
+/// With `AVX2` it loads each vec4 whole and transposes 4×4 blocks with
+/// unpack shuffles (7 shuffles per 8 corners); the element-by-element copy
+/// of the plain version compiles to one insert per float, which on AVX2 was
+/// the bottleneck of the whole kernel. Either way the lanes hold the same
+/// bits: loads and shuffles do not touch values.
+#[inline(always)]
+fn load_corner<const AVX2: bool>(r: &[f32], stride: usize, off: usize, dst: &mut Corner) {
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is true only in code compiled with the `avx2`
+        // feature, which runs only after `is_x86_feature_detected!("avx2")`.
+        unsafe { load_corner_avx2(r, stride, off, dst) };
+        return;
+    }
+    let r = &r[..LANES * stride];
+    for i in 0..LANES {
+        for (a, lane) in dst.iter_mut().enumerate() {
+            lane[i] = r[stride * i + off + a];
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn load_corner_avx2(r: &[f32], stride: usize, off: usize, dst: &mut Corner) {
+    use std::arch::x86_64::*;
+    let r = &r[..LANES * stride];
+    let mut v = [_mm256_setzero_ps(); 4];
+    for (i, v) in v.iter_mut().enumerate() {
+        let lo = &r[stride * i + off..][..4];
+        let hi = &r[stride * (i + 4) + off..][..4];
+        // SAFETY: `lo` and `hi` are 4 floats each (the slicing checked it);
+        // unaligned loads.
+        *v = unsafe {
+            _mm256_insertf128_ps::<1>(
+                _mm256_castps128_ps256(_mm_loadu_ps(lo.as_ptr())),
+                _mm_loadu_ps(hi.as_ptr()),
+            )
+        };
+    }
+    // v[i] = (x, y, z, w) of record i | of record i + 4. Per 128-bit half:
+    let t0 = _mm256_unpacklo_ps(v[0], v[1]); // x0 x1 y0 y1
+    let t1 = _mm256_unpackhi_ps(v[0], v[1]); // z0 z1 w0 w1
+    let t2 = _mm256_unpacklo_ps(v[2], v[3]); // x2 x3 y2 y3
+    let t3 = _mm256_unpackhi_ps(v[2], v[3]); // z2 z3 w2 w3
+    let lo64 = |a: __m256, b: __m256| {
+        _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(a), _mm256_castps_pd(b)))
+    };
+    let hi64 = |a: __m256, b: __m256| {
+        _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(a), _mm256_castps_pd(b)))
+    };
+    // SAFETY: each destination is 8 floats; unaligned stores.
+    unsafe {
+        _mm256_storeu_ps(dst[0].as_mut_ptr(), lo64(t0, t2)); // x0 x1 x2 x3 | x4 x5 x6 x7
+        _mm256_storeu_ps(dst[1].as_mut_ptr(), hi64(t0, t2)); // y
+        _mm256_storeu_ps(dst[2].as_mut_ptr(), lo64(t1, t3)); // z
+    }
+}
+
+/// [`tri_sign_nb`] of [`LANES`] triangles `(p0, p1, p2)` given as lanes. A
+/// fixed-count loop over a straight-line body: LLVM vectorises it, one
+/// vector instruction per operation of the contract.
+#[inline(always)]
+fn signs8(p0: &Corner, p1: &Corner, p2: &Corner, l: Light) -> [i32; LANES] {
+    let mut out = [0i32; LANES];
+    for (i, o) in out.iter_mut().enumerate() {
+        let c = |p: &Corner| [p[0][i], p[1][i], p[2][i]];
+        *o = tri_sign_nb(c(p0), c(p1), c(p2), l);
+    }
+    out
+}
+
+/// The caps loop: blocks of [`LANES`] records (12 floats each), then the
+/// tail record by record through the same [`tri_sign_nb`].
+#[inline(always)]
+fn caps_impl<const AVX2: bool>(data: &[f32], l: Light, out: &mut [i8]) {
+    let mut blocks = out.chunks_exact_mut(LANES);
+    let mut recs = data.chunks_exact(LANES * 12);
+    for (o, r) in (&mut blocks).zip(&mut recs) {
+        let mut p = [[[0f32; LANES]; 3]; 3];
+        for (c, p) in p.iter_mut().enumerate() {
+            load_corner::<AVX2>(r, 12, 4 * c, p);
+        }
+        let s = signs8(&p[0], &p[1], &p[2], l);
+        for (o, s) in o.iter_mut().zip(s) {
+            *o = s as i8;
+        }
+    }
+    let tail = blocks.into_remainder();
+    for (o, r) in tail.iter_mut().zip(recs.remainder().chunks_exact(12)) {
+        *o = tri_sign_nb(xyz(r, 0), xyz(r, 4), xyz(r, 8), l) as i8;
+    }
+}
+
+fn caps_plain(data: &[f32], l: Light, out: &mut [i8]) {
+    caps_impl::<false>(data, l, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn caps_avx2(data: &[f32], l: Light, out: &mut [i8]) {
+    caps_impl::<true>(data, l, out)
+}
+
+/// True when the AVX2 versions may run.
+#[inline]
+fn have_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Reference orientation of every caps record (12 floats each):
+/// `out[t] = tri_sign(P0, P1, P2, l)` of record `t`, bit for bit.
+/// `data.len()` must be `12 · out.len()`.
+pub fn cap_signs(data: &[f32], l: Light, out: &mut [i8]) {
+    assert_eq!(data.len(), out.len() * 12, "caps size mismatch");
+    #[cfg(target_arch = "x86_64")]
+    if have_avx2() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { caps_avx2(data, l, out) };
+    }
+    caps_plain(data, l, out)
+}
+
+/// Sides record by record, as the shader does: every record `(A, B, O_0 …
+/// O_{k−1})` sums `tri_sign(A, B, O_j)` over its slots. Blocks of [`LANES`]
+/// records share the lanes of A and B across the `k` slots.
+#[inline(always)]
+fn sides_impl<const AVX2: bool>(k: usize, data: &[f32], l: Light, out: &mut [i8]) {
+    let stride = (2 + k) * 4;
+    let mut blocks = out.chunks_exact_mut(LANES);
+    let mut recs = data.chunks_exact(LANES * stride);
+    for (o, r) in (&mut blocks).zip(&mut recs) {
+        let mut a = [[0f32; LANES]; 3];
+        let mut b = [[0f32; LANES]; 3];
+        let mut q = [[0f32; LANES]; 3];
+        load_corner::<AVX2>(r, stride, 0, &mut a);
+        load_corner::<AVX2>(r, stride, 4, &mut b);
+        let mut sum = [0i32; LANES];
+        for j in 0..k {
+            load_corner::<AVX2>(r, stride, 8 + 4 * j, &mut q);
+            let s = signs8(&a, &b, &q, l);
+            for (m, s) in sum.iter_mut().zip(s) {
+                *m += s;
+            }
+        }
+        for (o, m) in o.iter_mut().zip(sum) {
+            *o = m as i8;
+        }
+    }
+    let tail = blocks.into_remainder();
+    for (m, r) in tail.iter_mut().zip(recs.remainder().chunks_exact(stride)) {
+        let (a, b) = (xyz(r, 0), xyz(r, 4));
+        let mut sum = 0i32;
+        for j in 0..k {
+            sum += tri_sign_nb(a, b, xyz(r, 8 + 4 * j), l);
+        }
+        *m = sum as i8;
+    }
+}
+
+fn sides_plain(k: usize, data: &[f32], l: Light, out: &mut [i8]) {
+    sides_impl::<false>(k, data, l, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn sides_avx2(k: usize, data: &[f32], l: Light, out: &mut [i8]) {
+    sides_impl::<true>(k, data, l, out)
+}
+
+/// Reference multiplicity of every record of a sides bucket with `k`
+/// opposite slots, record by record (what the sides shader computes), bit
+/// for bit [`crate::multiplicity::edge_multiplicity`]. `data.len()` must be
+/// `(2 + k) · 4 · out.len()`.
+pub fn side_multiplicities(k: usize, data: &[f32], l: Light, out: &mut [i8]) {
+    assert_eq!(data.len(), out.len() * (2 + k) * 4, "bucket size mismatch");
+    #[cfg(target_arch = "x86_64")]
+    if have_avx2() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { sides_avx2(k, data, l, out) };
+    }
+    sides_plain(k, data, l, out)
+}
+
+/// Sum of `parity[j] · caps[tri[j]]` per record of `K` slots. The caller
+/// has checked every index against `caps.len()`, so the loop has no branch.
+///
+/// # Safety
+/// Every `tri` entry must be below `caps.len()`.
+#[inline(always)]
+unsafe fn gather_body<const K: usize>(tri: &[u32], parity: &[i8], caps: &[i8], out: &mut [i8]) {
+    for ((m, t), p) in out
+        .iter_mut()
+        .zip(tri.chunks_exact(K))
+        .zip(parity.chunks_exact(K))
+    {
+        let mut sum = 0i32;
+        for j in 0..K {
+            // SAFETY: the caller guarantees t[j] < caps.len().
+            let c = unsafe { *caps.get_unchecked(t[j] as usize) };
+            sum += p[j] as i32 * c as i32;
+        }
+        *m = sum as i8;
+    }
+}
+
+/// Side multiplicities as signed sums of already evaluated triangle signs:
+/// record `r` gets `Σ_j parity[r·k + j] · caps[tri[r·k + j]]`. Every `tri`
+/// entry must index `caps` (the caller routes records with unknown slots
+/// elsewhere); panics otherwise.
+pub fn sides_from_caps(k: usize, tri: &[u32], parity: &[i8], caps: &[i8], out: &mut [i8]) {
+    assert!(
+        try_sides_from_caps(k, tri, parity, caps, out),
+        "slot names a triangle past the caps"
+    );
+}
+
+/// [`sides_from_caps`], or `false` (and `out` untouched) when some slot
+/// names no triangle (`tri` entry `>= caps.len()`, e.g. the `u32::MAX` of a
+/// slot with no matching cap in a damaged file). The check is one
+/// vectorised pass over the indices; it lets the summing loop run without a
+/// bounds check per slot.
+pub fn try_sides_from_caps(
+    k: usize,
+    tri: &[u32],
+    parity: &[i8],
+    caps: &[i8],
+    out: &mut [i8],
+) -> bool {
+    assert_eq!(tri.len(), out.len() * k, "slot table size mismatch");
+    assert_eq!(parity.len(), tri.len(), "slot table size mismatch");
+    let max = tri.iter().fold(0u32, |a, &t| a.max(t));
+    if !tri.is_empty() && max as usize >= caps.len() {
+        return false;
+    }
+    // SAFETY: every index was checked against caps.len() just above.
+    unsafe {
+        match k {
+            1 => gather_body::<1>(tri, parity, caps, out),
+            2 => gather_body::<2>(tri, parity, caps, out),
+            3 => gather_body::<3>(tri, parity, caps, out),
+            4 => gather_body::<4>(tri, parity, caps, out),
+            5 => gather_body::<5>(tri, parity, caps, out),
+            _ => {
+                for ((m, t), p) in out
+                    .iter_mut()
+                    .zip(tri.chunks_exact(k))
+                    .zip(parity.chunks_exact(k))
+                {
+                    let mut sum = 0i32;
+                    for (&t, &p) in t.iter().zip(p) {
+                        sum += p as i32 * *caps.get_unchecked(t as usize) as i32;
+                    }
+                    *m = sum as i8;
+                }
+            }
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    //! The kernels against the scalar contract ([`tri_sign`], which is the
+    //! transcription of format-spec/multiplicity.md), bit for bit: every
+    //! compiled version (plain, AVX2 when the CPU has it, and the run-time
+    //! dispatch), block lengths with and without a tail, and inputs chosen to
+    //! hit every tie of the lexicographic order, every exact zero of the
+    //! expression and values the rounding order changes.
+    use super::*;
+    use crate::multiplicity::tri_sign;
+
+    type CapsFn = fn(&[f32], Light, &mut [i8]);
+    type SidesFn = fn(usize, &[f32], Light, &mut [i8]);
+
+    /// Every compiled version of the caps loop this machine can run.
+    fn caps_versions() -> Vec<(&'static str, CapsFn)> {
+        let mut v: Vec<(&'static str, CapsFn)> =
+            vec![("plain", caps_plain), ("dispatch", cap_signs)];
+        #[cfg(target_arch = "x86_64")]
+        if have_avx2() {
+            // SAFETY: only when the CPU has AVX2.
+            v.push(("avx2", |d, l, o| unsafe { caps_avx2(d, l, o) }));
+        }
+        v
+    }
+
+    /// Every compiled version of the per-record sides loop.
+    fn sides_versions() -> Vec<(&'static str, SidesFn)> {
+        let mut v: Vec<(&'static str, SidesFn)> =
+            vec![("plain", sides_plain), ("dispatch", side_multiplicities)];
+        #[cfg(target_arch = "x86_64")]
+        if have_avx2() {
+            // SAFETY: only when the CPU has AVX2.
+            v.push(("avx2", |k, d, l, o| unsafe { sides_avx2(k, d, l, o) }));
+        }
+        v
+    }
+
+    /// Xorshift64, fixed seeds: failures reproduce.
+    struct Gen(u64);
+
+    impl Gen {
+        fn u(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+        fn below(&mut self, n: u64) -> usize {
+            (self.u() % n) as usize
+        }
+        /// Uniform in [-1, 1).
+        fn unit(&mut self) -> f32 {
+            (self.u() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        }
+        /// A coordinate: ties and exact zeros are common, and so are values
+        /// whose products round.
+        fn coord(&mut self) -> f32 {
+            const LATTICE: [f32; 9] = [-1.0, -0.5, -0.0, 0.0, 0.0, 0.5, 1.0, 1.5, 3.0];
+            match self.below(8) {
+                0..=2 => LATTICE[self.below(LATTICE.len() as u64)],
+                3 => self.unit() * 1e-6,
+                4 => self.unit() * 1e6,
+                5 => 1.0 + self.below(8) as f32 * f32::EPSILON,
+                _ => self.unit(),
+            }
+        }
+        fn point(&mut self) -> [f32; 3] {
+            [self.coord(), self.coord(), self.coord()]
+        }
+        /// A triangle: generic, with duplicate corners, with corners equal
+        /// but for the sign of a zero, nearly flat, or on a lattice.
+        fn tri(&mut self) -> [[f32; 3]; 3] {
+            let mut t = [self.point(), self.point(), self.point()];
+            match self.below(6) {
+                0 => t[self.below(3)] = t[self.below(3)],
+                1 => {
+                    let (i, j) = (self.below(3), self.below(3));
+                    t[i] = t[j].map(|v| if v == 0.0 { -v } else { v });
+                }
+                2 => {
+                    for p in &mut t {
+                        p[2] = 0.1 * p[0] + 0.37 * p[1];
+                    }
+                }
+                3 => {
+                    // Two corners share x, or x and y: the deeper ties.
+                    let (i, j) = (self.below(3), self.below(3));
+                    t[i][0] = t[j][0];
+                    if self.below(2) == 0 {
+                        t[i][1] = t[j][1];
+                    }
+                }
+                _ => {}
+            }
+            t
+        }
+        /// A light placed against triangle `t`: on a corner (also with a
+        /// zero of the other sign), on an edge line, in its plane, parallel
+        /// to it, or anywhere; point and directional.
+        fn light(&mut self, t: [[f32; 3]; 3]) -> Light {
+            let (a, b, c) = (t[0], t[1], t[2]);
+            let p = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
+            match self.below(9) {
+                0 => p(t[self.below(3)], 1.0),
+                1 => p(t[self.below(3)].map(|v| if v == 0.0 { -v } else { v }), 1.0),
+                2 => p([0, 1, 2].map(|k| 2.0 * b[k] - a[k]), 1.0),
+                3 => p([0, 1, 2].map(|k| b[k] + c[k] - a[k]), 1.0),
+                4 => p([0, 1, 2].map(|k| b[k] - a[k]), 0.0),
+                5 => p(self.point(), 0.0),
+                6 => p([0.0, -0.0, 0.0], 0.0),
+                _ => p(self.point(), 1.0),
+            }
+        }
+    }
+
+    /// Caps records (12 floats each, `.w` = 1) of triangles in every corner
+    /// order, so both parities of each sorting permutation occur.
+    fn caps_records(tris: &[[[f32; 3]; 3]]) -> Vec<f32> {
+        const PERMS: [[usize; 3]; 6] = [
+            [0, 1, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [1, 0, 2],
+            [0, 2, 1],
+            [2, 1, 0],
+        ];
+        let mut d = Vec::new();
+        for t in tris {
+            for p in PERMS {
+                for i in p {
+                    d.extend_from_slice(&t[i]);
+                    d.push(1.0);
+                }
+            }
+        }
+        d
+    }
+
+    fn check_caps(data: &[f32], l: Light, what: &str) {
+        let n = data.len() / 12;
+        let want: Vec<i8> = data
+            .chunks_exact(12)
+            .map(|r| tri_sign(xyz(r, 0), xyz(r, 4), xyz(r, 8), l) as i8)
+            .collect();
+        for (name, f) in caps_versions() {
+            // Every length up to the whole: blocks plus each tail size.
+            for len in [
+                n,
+                n.saturating_sub(1),
+                n.saturating_sub(7),
+                n / 2 + 3,
+                9,
+                7,
+                1,
+                0,
+            ] {
+                let len = len.min(n);
+                let mut got = vec![9i8; len];
+                f(&data[..12 * len], l, &mut got);
+                for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+                    assert_eq!(
+                        g,
+                        w,
+                        "{name} {what}: record {t} of {len}, light {l:?}, corners {:?}",
+                        &data[12 * t..12 * t + 12]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn caps_kernel_is_the_contract_bit_for_bit() {
+        let mut g = Gen(0x9E37_79B9_7F4A_7C15);
+        let mut nonzero = [0usize; 3];
+        for round in 0..3000 {
+            // Up to 7 triangles × 6 orders = 42 records: blocks and tails.
+            let n = 1 + g.below(7);
+            let tris: Vec<_> = (0..n).map(|_| g.tri()).collect();
+            let at = g.below(n as u64);
+            let l = g.light(tris[at]);
+            let data = caps_records(&tris);
+            for r in data.chunks_exact(12) {
+                nonzero[(tri_sign(xyz(r, 0), xyz(r, 4), xyz(r, 8), l) + 1) as usize] += 1;
+            }
+            check_caps(&data, l, &format!("round {round}"));
+        }
+        // The inputs exercise all three answers, not just the easy ones.
+        assert!(nonzero.iter().all(|&c| c > 1000), "{nonzero:?}");
+    }
+
+    #[test]
+    fn caps_kernel_matches_on_a_long_run_of_random_triangles() {
+        // 8 · 125 + 5 records per light through the vectorised blocks.
+        let mut g = Gen(42);
+        for _ in 0..40 {
+            let tris: Vec<_> = (0..(8 * 125 + 5) / 6 + 1).map(|_| g.tri()).collect();
+            let l = g.light(tris[0]);
+            let mut data = caps_records(&tris);
+            data.truncate(12 * (8 * 125 + 5));
+            check_caps(&data, l, "long run");
+        }
+    }
+
+    #[test]
+    fn caps_kernel_matches_outside_the_contract_too() {
+        // Infinities, NaN and huge values are outside the contract, but the
+        // branch-free comparisons are the scalar ones on every input, so even
+        // here the answers agree.
+        let odd = [
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            f32::MAX,
+            -f32::MAX,
+            1e-40,
+            -1e-40,
+        ];
+        let mut g = Gen(7);
+        for _ in 0..2000 {
+            let mut tris: Vec<_> = (0..3).map(|_| g.tri()).collect();
+            for t in &mut tris {
+                if g.below(2) == 0 {
+                    t[g.below(3)][g.below(3)] = odd[g.below(odd.len() as u64)];
+                }
+            }
+            let mut l = g.light(tris[0]);
+            if g.below(4) == 0 {
+                l[g.below(3)] = odd[g.below(odd.len() as u64)];
+            }
+            check_caps(&caps_records(&tris), l, "odd values");
+        }
+    }
+
+    /// A sides bucket of `n` records with `k` slots: A and B usually in the
+    /// file's order (`A < B`), sometimes not (a damaged record, which the
+    /// shader still evaluates through the full sort).
+    fn bucket(g: &mut Gen, k: usize, n: usize) -> (Vec<f32>, Light) {
+        let mut d = Vec::new();
+        let mut l = [0.0; 4];
+        for r in 0..n {
+            let t = g.tri();
+            let (mut a, mut b) = (t[0], t[1]);
+            if g.below(8) != 0 && crate::multiplicity::lex_less(b, a) {
+                std::mem::swap(&mut a, &mut b);
+            }
+            if r == 0 {
+                l = g.light(t);
+            }
+            d.extend_from_slice(&[a[0], a[1], a[2], k as f32, b[0], b[1], b[2], k as f32]);
+            for j in 0..k {
+                let o = if j == 0 { t[2] } else { g.tri()[g.below(3)] };
+                d.extend_from_slice(&[o[0], o[1], o[2], 1.0]);
+            }
+        }
+        (d, l)
+    }
+
+    #[test]
+    fn sides_kernel_is_the_contract_bit_for_bit() {
+        let mut g = Gen(1234567);
+        for round in 0..1500 {
+            let k = 1 + g.below(7); // 6 and 7 take the run-time-k path
+            let n = [0, 1, 7, 8, 9, 16, 23, 8 * 6 + 5][g.below(8)];
+            let (data, l) = bucket(&mut g, k, n);
+            let want: Vec<i8> = data
+                .chunks_exact((2 + k) * 4)
+                .map(|r| {
+                    let o: Vec<[f32; 3]> = (0..k).map(|j| xyz(r, 8 + 4 * j)).collect();
+                    crate::multiplicity::edge_multiplicity(xyz(r, 0), xyz(r, 4), &o, l) as i8
+                })
+                .collect();
+            for (name, f) in sides_versions() {
+                let mut got = vec![99i8; n];
+                f(k, &data, l, &mut got);
+                assert_eq!(
+                    got, want,
+                    "{name} round {round}: k = {k}, n = {n}, light {l:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn gather_equals_the_per_slot_sum() {
+        let mut g = Gen(99);
+        let caps: Vec<i8> = (0..1000).map(|_| g.below(3) as i8 - 1).collect();
+        for k in 1..=8 {
+            for n in [0, 1, 5, 64, 333] {
+                let tri: Vec<u32> = (0..n * k).map(|_| g.below(1000) as u32).collect();
+                let par: Vec<i8> = (0..n * k).map(|_| g.below(3) as i8 - 1).collect();
+                let want: Vec<i8> = tri
+                    .chunks_exact(k)
+                    .zip(par.chunks_exact(k))
+                    .map(|(t, p)| {
+                        t.iter()
+                            .zip(p)
+                            .map(|(&t, &p)| p as i32 * caps[t as usize] as i32)
+                            .sum::<i32>() as i8
+                    })
+                    .collect();
+                let mut got = vec![0i8; n];
+                sides_from_caps(k, &tri, &par, &caps, &mut got);
+                assert_eq!(got, want, "k = {k}, n = {n}");
+            }
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "past the caps")]
+    fn gather_refuses_an_index_past_the_caps() {
+        let mut out = [0i8; 1];
+        sides_from_caps(2, &[0, 3], &[1, 1], &[1, 1, 1], &mut out);
+    }
+}
