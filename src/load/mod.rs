@@ -83,6 +83,42 @@ impl InputDigest {
     pub fn finish(self) -> (u64, [u8; 32]) {
         (self.bytes, self.hasher.finalize().into())
     }
+
+    /// Byte count and SHA-256 of `data` alone.
+    pub fn of(data: &[u8]) -> (u64, [u8; 32]) {
+        let mut digest = Self::default();
+        digest.update(data);
+        digest.finish()
+    }
+}
+
+/// Inputs smaller than this are hashed on the calling thread: starting a
+/// thread costs tens of microseconds, about what hashing this much takes.
+const CONCURRENT_DIGEST_MIN: usize = 256 << 10;
+
+/// Runs `work` on this thread while another thread computes
+/// [`InputDigest::of`]`(data)`, and returns both.
+///
+/// Why: hashing a large text file costs a few percent of parsing it, and the
+/// two are independent (`work` may read `data` too). It only uses a second
+/// thread when the rayon pool the caller runs in has more than one, so
+/// `--threads 1` still means one core. The digest is the same either way.
+pub fn digest_while<T>(data: &[u8], work: impl FnOnce() -> T) -> ((u64, [u8; 32]), T) {
+    if data.len() < CONCURRENT_DIGEST_MIN || rayon::current_num_threads() < 2 {
+        return (InputDigest::of(data), work());
+    }
+    std::thread::scope(|scope| {
+        let hasher = std::thread::Builder::new()
+            .name("svpack-sha256".into())
+            .spawn_scoped(scope, || InputDigest::of(data));
+        let result = work();
+        // If the thread could not be started (or died), hash here instead.
+        let digest = match hasher.map(|h| h.join()) {
+            Ok(Ok(digest)) => digest,
+            _ => InputDigest::of(data),
+        };
+        (digest, result)
+    })
 }
 
 /// Input formats svpack reads.

@@ -17,7 +17,12 @@
 //!    without a name, and validates texture/normal indices we never use; and
 //!    with `mtllib` gone no `.mtl` file is ever looked for. `l`/`p` elements
 //!    are counted here. Line continuations (`\` at the end of a line), which
-//!    tobj does not understand, are joined.
+//!    tobj does not understand, are joined. In the common case (UTF-8 text
+//!    that tobj accepts without repairs) this runs piece by piece as tobj
+//!    reads (`PrescanReader`), on a 64 KiB copy of each piece, so the file is
+//!    neither modified (it may be being hashed on another thread) nor walked
+//!    twice; anything else is redone on an owned copy of the whole text
+//!    (`parse_owned`), with the same result.
 //! 3. **Parse** with `tobj::load_obj_buf` (untriangulated, one index per
 //!    attribute). A few recoverable problems are repaired in place and the
 //!    parse is retried (see `repair_vertex_lines`); any other failure is turned
@@ -44,7 +49,7 @@
 //! * `primitives`: objects/groups (tobj models) that produced at least one
 //!   triangle, which is also the number of [`Part`]s.
 
-use super::{InputDigest, Part, Soup};
+use super::{Part, Soup};
 use crate::error::{Error, Result};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
@@ -62,44 +67,110 @@ use std::path::Path;
 /// unparsable numbers, indices out of range, UTF-16 without byte-order mark,
 /// binary data. An empty file gives an empty soup. NaN/Inf coordinates are
 /// passed through (the build step rejects them).
+///
+/// The input's SHA-256 is computed beside the parse, on a second thread, when
+/// the calling rayon pool has more than one thread ([`super::digest_while`]).
 pub fn load_obj(path: &Path, data: Vec<u8>) -> Result<Soup> {
-    let mut digest = InputDigest::default();
-    digest.update(&data);
-    let (input_bytes, input_sha256) = digest.finish();
+    // Hashing and parsing are independent; with more than one thread the
+    // digest is computed beside the parse (see `digest_while`).
+    let ((input_bytes, input_sha256), streamed) =
+        super::digest_while(&data, || guarded(|| parse_streaming(&data)));
+    let parsed = match streamed {
+        Ok(Some(parsed)) => {
+            // The text is no longer needed; free it before building the
+            // soup, which for big files is the peak of memory use.
+            drop(data);
+            Ok(parsed)
+        }
+        Ok(None) => guarded(|| parse_owned(data)),
+        Err(msg) => Err(msg),
+    };
+    let mut soup = parsed
+        .and_then(|parsed| guarded(|| finish(parsed)))
+        .map_err(|msg| Error::input(path, msg))?;
+    soup.input_bytes = input_bytes;
+    soup.input_sha256 = input_sha256;
+    Ok(soup)
+}
 
-    // tobj and earcutr are third-party parsers fed untrusted input; the known
-    // panic causes are avoided by the pre-scan, but a panic must still never
-    // take the whole process down.
-    let mut soup = match catch_unwind(AssertUnwindSafe(|| load_text(data))) {
-        Ok(Ok(soup)) => soup,
-        Ok(Err(msg)) => return Err(Error::input(path, msg)),
+/// Runs one step of the pipeline, turning a panic into an error message.
+///
+/// tobj and earcutr are third-party parsers fed untrusted input; the known
+/// panic causes are avoided by the pre-scan, but a panic must still never
+/// take the whole process down.
+fn guarded<T>(step: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
+    match catch_unwind(AssertUnwindSafe(step)) {
+        Ok(result) => result,
         Err(payload) => {
             let what = payload
                 .downcast_ref::<&str>()
                 .map(|s| s.to_string())
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".to_string());
-            return Err(Error::input(
-                path,
-                format!("internal error while reading OBJ: {what}"),
-            ));
+            Err(format!("internal error while reading OBJ: {what}"))
         }
-    };
-    soup.input_bytes = input_bytes;
-    soup.input_sha256 = input_sha256;
-    Ok(soup)
+    }
 }
 
-/// The whole pipeline on owned bytes; errors are messages without the path.
-fn load_text(data: Vec<u8>) -> Result<Soup, String> {
+/// What parsing produced, before the soup is built.
+struct Parsed {
+    models: Vec<tobj::Model>,
+    scan: Prescan,
+    warnings: Vec<String>,
+}
+
+/// The common case in one pass, without copying the file: UTF-8 text with
+/// `\n` line ends that tobj accepts as it is (after the pre-scan). The
+/// pre-scan runs piece by piece as tobj reads (`PrescanReader`), on a small
+/// buffer, so the file itself stays unmodified (it may be being hashed on
+/// another thread) and each piece is still in cache when tobj parses it.
+///
+/// Returns `None` when the text needs anything else (re-encoding, NUL bytes,
+/// invalid UTF-8, CR-only line ends, repairs, or an error to diagnose):
+/// then [`parse_owned`] does all of it on the whole text, from the start, so
+/// the result is exactly the same whichever path is taken.
+fn parse_streaming(data: &[u8]) -> Result<Option<Parsed>, String> {
+    if data.starts_with(&[0xFE, 0xFF]) || data.starts_with(&[0xFF, 0xFE]) {
+        return Ok(None);
+    }
+    // As `normalize_encoding` does: the byte-order mark is not text.
+    let text = data.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(data);
+    // Stops at the first line end, so this is no second pass.
+    if !text.contains(&b'\n') && text.contains(&b'\r') {
+        return Ok(None);
+    }
+    let mut reader = PrescanReader::new(text);
+    match run_tobj(&mut reader) {
+        Ok(models) if reader.rest.is_empty() && !reader.needs_decoding => Ok(Some(Parsed {
+            models,
+            scan: reader.scanner.scan,
+            warnings: Vec::new(),
+        })),
+        _ => Ok(None),
+    }
+}
+
+/// Every step on an owned copy of the text, which may be modified as a whole:
+/// decoding, the pre-scan, and parsing with repairs and diagnostics.
+fn parse_owned(data: Vec<u8>) -> Result<Parsed, String> {
     let mut warnings = Vec::new();
     let mut text = normalize_encoding(data, &mut warnings)?;
     let scan = prescan(&mut text);
     let models = parse_with_repairs(&mut text, &scan, &mut warnings)?;
-    // The text is no longer needed; free it before building the soup, which
-    // for big files is the peak of memory use.
-    drop(text);
+    Ok(Parsed {
+        models,
+        scan,
+        warnings,
+    })
+}
 
+/// Builds the soup and the statistics; errors are messages without the path.
+fn finish(parsed: Parsed) -> Result<Soup, String> {
+    let Parsed {
+        models,
+        scan,
+        mut warnings,
+    } = parsed;
     let mut soup = build_soup(models, &mut warnings)?;
     let stats = &mut soup.stats;
     stats.skipped_points += scan.point_refs;
@@ -264,13 +335,37 @@ impl Lines {
             return None;
         }
         let start = self.pos;
-        let end = text[start..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(text.len(), |i| start + i);
+        let end = find_newline(&text[start..]).map_or(text.len(), |i| start + i);
         self.pos = end + 1;
         Some((start, end))
     }
+}
+
+/// Position of the first `\n` in `bytes`, eight bytes at a time. Why not
+/// `iter().position`: every line of the file goes through this, and a
+/// byte-by-byte loop cost more than everything else the pre-scan does.
+fn find_newline(bytes: &[u8]) -> Option<usize> {
+    const ONES: u64 = u64::from_ne_bytes([0x01; 8]);
+    const HIGHS: u64 = u64::from_ne_bytes([0x80; 8]);
+    const NEWLINES: u64 = u64::from_ne_bytes([b'\n'; 8]);
+    let mut words = bytes.chunks_exact(8);
+    let mut at = 0;
+    for word in &mut words {
+        // Bytes equal to `\n` become zero; `(x - 1) & !x` sets the high bit
+        // of every zero byte, and of no byte below the first one (a borrow
+        // only moves upwards), so the lowest flag is the first `\n`.
+        let x = u64::from_le_bytes(word.try_into().expect("8 bytes")) ^ NEWLINES;
+        let zeros = x.wrapping_sub(ONES) & !x & HIGHS;
+        if zeros != 0 {
+            return Some(at + zeros.trailing_zeros() as usize / 8);
+        }
+        at += 8;
+    }
+    words
+        .remainder()
+        .iter()
+        .position(|&b| b == b'\n')
+        .map(|i| at + i)
 }
 
 /// ASCII whitespace as `str::split_whitespace` (which tobj uses) sees it.
@@ -386,29 +481,83 @@ enum Kind {
 
 /// One pass over the text: count, blank unused statements, join continuations.
 fn prescan(text: &mut [u8]) -> Prescan {
-    let mut scan = Prescan::default();
-    let mut lines = Lines::default();
-    let mut continued: Option<Kind> = None;
-    while let Some((s, e)) = lines.next(text) {
-        let line = &mut text[s..e];
-        let first_part = continued.is_none();
-        let kind = match continued.take() {
+    let mut scanner = Prescanner::default();
+    scanner.run(text, 0);
+    scanner.scan
+}
+
+/// The pre-scan as a state machine over consecutive pieces of the text, so it
+/// can also run piece by piece as tobj reads ([`PrescanReader`]).
+#[derive(Default)]
+struct Prescanner {
+    scan: Prescan,
+    /// Kind of the statement whose line ended in a continuation.
+    continued: Option<Kind>,
+}
+
+impl Prescanner {
+    /// Pre-scans `piece`, which starts at byte `offset` of the text and is
+    /// either the rest of the text or ends just after a `\n`.
+    fn run(&mut self, piece: &mut [u8], offset: usize) {
+        // Line ends from a bit mask per 64 bytes rather than a search per
+        // line: the mask is branch-free SIMD, while a search stops at a
+        // different place on every line (a mispredicted branch per line).
+        // `line` only changes bytes up to its own `\n`, so the masks of the
+        // bytes after it stay right.
+        let mut start = 0;
+        let mut block = 0;
+        while block < piece.len() {
+            let block_end = (block + 64).min(piece.len());
+            let mut bits = newline_bits(&piece[block..block_end]);
+            while bits != 0 {
+                let e = block + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                self.line(piece, start, e, offset);
+                start = e + 1;
+            }
+            block = block_end;
+        }
+        if start < piece.len() {
+            self.line(piece, start, piece.len(), offset);
+        }
+    }
+
+    /// One line `piece[s..e]`, followed by a `\n` unless `e` is the end.
+    fn line(&mut self, piece: &mut [u8], s: usize, e: usize, offset: usize) {
+        let scan = &mut self.scan;
+        let line = &mut piece[s..e];
+        let first_part = self.continued.is_none();
+        let kind = match self.continued.take() {
             Some(kind) => kind,
-            None => classify_and_blank(line, &mut scan),
+            // Shortcuts for nearly every line of a mesh, with the result
+            // `classify_and_blank` would give (an ASCII keyword ended by a
+            // space is exactly what `keyword` finds).
+            None => match line {
+                [b'v', b' ', ..] => {
+                    scan.vertices += 1;
+                    Kind::Vertex
+                }
+                [b'f', b' ', ..] => {
+                    scan.faces += 1;
+                    Kind::Face
+                }
+                [b'#', ..] => Kind::Comment,
+                _ => classify_and_blank(line, scan),
+            },
         };
         if kind != Kind::Comment
             && let Some(backslash) = continuation(line)
         {
             line[backslash..].fill(b' ');
-            if e < text.len() {
-                text[e] = b' ';
-                scan.joins.push(e);
-                continued = Some(kind);
+            if e < piece.len() {
+                piece[e] = b' ';
+                scan.joins.push(offset + e);
+                self.continued = Some(kind);
             }
         }
         if kind == Kind::Point {
             // The first part starts with the (blanked) keyword, now "#".
-            let words = count_words(&text[s..e]);
+            let words = count_words(&piece[s..e]);
             scan.point_refs += if first_part {
                 words.saturating_sub(1)
             } else {
@@ -416,7 +565,139 @@ fn prescan(text: &mut [u8]) -> Prescan {
             };
         }
     }
-    scan
+}
+
+/// Bit `i` set where `block[i]` (at most 64 bytes) is `\n`.
+fn newline_bits(block: &[u8]) -> u64 {
+    // SSE2 is part of x86-64: 16 compares and one mask extraction per 16
+    // bytes (LLVM does not find this for the portable loop below, which it
+    // turns into slow 64-bit shifts per byte).
+    #[cfg(target_arch = "x86_64")]
+    if block.len() == 64 {
+        use std::arch::x86_64::{__m128i, _mm_cmpeq_epi8, _mm_movemask_epi8, _mm_set1_epi8};
+        // SAFETY: these intrinsics only need SSE2, which every x86-64 CPU
+        // has (it is part of the architecture's baseline target features).
+        let bits = unsafe {
+            let newline = _mm_set1_epi8(b'\n' as i8);
+            let mut bits = 0u64;
+            for (k, lane) in block.chunks_exact(16).enumerate() {
+                let v: __m128i = bytemuck::pod_read_unaligned(lane);
+                let mask = _mm_movemask_epi8(_mm_cmpeq_epi8(v, newline)) as u16;
+                bits |= u64::from(mask) << (16 * k);
+            }
+            bits
+        };
+        return bits;
+    }
+    block
+        .iter()
+        .enumerate()
+        .fold(0, |bits, (i, &b)| bits | (u64::from(b == b'\n') << i))
+}
+
+/// True if `bytes` are all ASCII and none is NUL: then they are valid UTF-8
+/// without NUL, which is all `normalize_encoding` asks of most files. One
+/// branch-free pass (it vectorises) instead of a NUL search plus UTF-8
+/// validation.
+fn plain_ascii(bytes: &[u8]) -> bool {
+    const ONES: u64 = u64::from_ne_bytes([0x01; 8]);
+    const HIGHS: u64 = u64::from_ne_bytes([0x80; 8]);
+    let mut words = bytes.chunks_exact(8);
+    // Per byte, the high bit of `x` flags non-ASCII, and that of
+    // `(x - 1) & !x` flags zero if the byte and those below it are ASCII
+    // (otherwise the word is flagged already).
+    let flags = words.by_ref().fold(0u64, |flags, word| {
+        let x = u64::from_le_bytes(word.try_into().expect("8 bytes"));
+        flags | (x.wrapping_sub(ONES) & !x) | x
+    });
+    flags & HIGHS == 0 && words.remainder().iter().all(|&b| b != 0 && b.is_ascii())
+}
+
+/// Bytes per piece [`PrescanReader`] copies and pre-scans at a time: small
+/// enough to stay in the L2 cache until tobj has read it.
+const PIECE: usize = 64 << 10;
+
+/// Gives tobj the pre-scanned text without modifying (or copying all of) the
+/// original: each piece of whole lines is copied into a buffer, checked
+/// (no NUL byte, valid UTF-8, as `normalize_encoding` requires) and
+/// pre-scanned there just before tobj reads it.
+struct PrescanReader<'a> {
+    /// Text not yet copied.
+    rest: &'a [u8],
+    /// Offset of `rest` in the text.
+    offset: usize,
+    /// The current piece, pre-scanned, and how much of it tobj has read.
+    piece: Vec<u8>,
+    read: usize,
+    scanner: Prescanner,
+    /// Set (and reading fails) when a piece needs `normalize_encoding`.
+    needs_decoding: bool,
+}
+
+impl<'a> PrescanReader<'a> {
+    fn new(text: &'a [u8]) -> Self {
+        Self {
+            rest: text,
+            offset: 0,
+            piece: Vec::with_capacity(PIECE.min(text.len()) + 256),
+            read: 0,
+            scanner: Prescanner::default(),
+            needs_decoding: false,
+        }
+    }
+
+    fn next_piece(&mut self) -> std::io::Result<()> {
+        let rest = self.rest;
+        // Whole lines: up to the first `\n` at or after PIECE bytes (a
+        // `\n` is ASCII, so pieces also split the text between characters).
+        let want = PIECE.min(rest.len());
+        let end = find_newline(&rest[want - 1..]).map_or(rest.len(), |i| want + i);
+        let (piece, rest) = rest.split_at(end);
+        if !plain_ascii(piece) && (piece.contains(&0) || std::str::from_utf8(piece).is_err()) {
+            self.needs_decoding = true;
+            return Err(std::io::Error::other("text needs decoding"));
+        }
+        self.piece.clear();
+        self.piece.extend_from_slice(piece);
+        self.scanner.run(&mut self.piece, self.offset);
+        self.offset += end;
+        self.rest = rest;
+        self.read = 0;
+        Ok(())
+    }
+}
+
+impl std::io::Read for PrescanReader<'_> {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        use std::io::BufRead;
+        let available = self.fill_buf()?;
+        let n = available.len().min(out.len());
+        out[..n].copy_from_slice(&available[..n]);
+        self.consume(n);
+        Ok(n)
+    }
+}
+
+impl std::io::BufRead for PrescanReader<'_> {
+    // Called for every line tobj reads.
+    #[inline]
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        if self.read < self.piece.len() {
+            return Ok(&self.piece[self.read..]);
+        }
+        if self.needs_decoding {
+            return Err(std::io::Error::other("text needs decoding"));
+        }
+        if self.read == self.piece.len() && !self.rest.is_empty() {
+            self.next_piece()?;
+        }
+        Ok(&self.piece[self.read..])
+    }
+
+    #[inline]
+    fn consume(&mut self, n: usize) {
+        self.read = (self.read + n).min(self.piece.len());
+    }
 }
 
 /// Classifies a statement by its keyword, counts it and blanks it if tobj
@@ -475,7 +756,7 @@ fn no_materials(_: &Path) -> tobj::MTLLoadResult {
     Ok(Default::default())
 }
 
-fn run_tobj(text: &[u8]) -> Result<Vec<tobj::Model>, tobj::LoadError> {
+fn run_tobj(reader: &mut impl std::io::BufRead) -> Result<Vec<tobj::Model>, tobj::LoadError> {
     // Untriangulated (tobj only fans, wrong for concave polygons) and one
     // index per attribute (single_index would split vertices at UV/normal
     // seams, which the weld step would then have to undo). Points and lines
@@ -486,8 +767,7 @@ fn run_tobj(text: &[u8]) -> Result<Vec<tobj::Model>, tobj::LoadError> {
         ignore_points: false,
         ignore_lines: false,
     };
-    let mut reader = text;
-    let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, no_materials)?;
+    let (models, _materials) = tobj::load_obj_buf(reader, &options, no_materials)?;
     Ok(models)
 }
 
@@ -502,7 +782,7 @@ fn parse_with_repairs(
     let mut repaired_vertices = false;
     let mut stripped_colors = false;
     loop {
-        let err = match run_tobj(text) {
+        let err = match run_tobj(&mut &*text) {
             Ok(models) => return Ok(models),
             Err(err) => err,
         };
@@ -760,45 +1040,80 @@ fn build_soup(models: Vec<tobj::Model>, warnings: &mut Vec<String>) -> Result<So
     let total_indices: usize = models.iter().map(|m| m.mesh.indices.len()).sum();
 
     let mut soup = Soup::default();
-    soup.positions.reserve_exact(total_positions);
-    soup.indices.reserve(total_indices);
     let mut triangulator = Triangulator::default();
     let mut empty_faces = 0u64;
 
     for model in models {
         let name = model.name;
-        let mesh = model.mesh;
+        let tobj::Mesh {
+            positions,
+            indices,
+            face_arities,
+            ..
+        } = model.mesh;
         let internal =
             |what: &str| format!("internal error: tobj returned {what} for object {name:?}");
-        if !mesh.positions.len().is_multiple_of(3) {
+        if !positions.len().is_multiple_of(3) {
             return Err(internal("a partial position"));
         }
-        let vertex_count = mesh.positions.len() / 3;
+        let vertex_count = positions.len() / 3;
         // tobj's indices point into the model's own positions; it should
         // never produce one out of range, but a wrong index here would only
-        // surface far away, so check (one tight pass).
-        if let Some(&bad) = mesh.indices.iter().find(|&&i| i as usize >= vertex_count) {
+        // surface far away, so check (one tight pass: `max` vectorises,
+        // `find` with its early exit does not).
+        if indices
+            .iter()
+            .copied()
+            .max()
+            .is_some_and(|max| max as usize >= vertex_count)
+        {
+            let bad = indices
+                .iter()
+                .find(|&&i| i as usize >= vertex_count)
+                .copied()
+                .unwrap_or_default();
             return Err(format!(
                 "object {name:?}: vertex index {bad} out of range ({vertex_count} vertices)"
             ));
         }
+        let all_triangles = face_arities.is_empty();
+        // tobj leaves face_arities empty when every face is a triangle.
+        if all_triangles && !indices.len().is_multiple_of(3) {
+            return Err(internal("a partial triangle"));
+        }
         // Fits: the total was checked above.
         let base = soup.positions.len() as u32;
-        soup.positions
-            .extend(mesh.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+        if soup.positions.is_empty() {
+            // The first model's buffer becomes the soup's (a single-object
+            // file is then not copied at all, nor are fresh pages faulted
+            // in); later models are appended to it.
+            soup.positions = into_triples(positions);
+            soup.positions
+                .reserve_exact(total_positions - soup.positions.len());
+        } else {
+            soup.positions
+                .extend(positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+        }
+        // This model's positions, flat, as the triangulator reads them.
+        let model_positions = soup.positions[base as usize..].as_flattened();
 
         let first_index = soup.indices.len();
-        if mesh.face_arities.is_empty() {
-            // tobj leaves face_arities empty when every face is a triangle.
-            if !mesh.indices.len().is_multiple_of(3) {
-                return Err(internal("a partial triangle"));
+        if all_triangles {
+            if soup.indices.is_empty() && base == 0 {
+                // Same as for the positions: nothing to offset, so no copy.
+                soup.indices = indices;
+                soup.indices.reserve(total_indices - soup.indices.len());
+            } else {
+                soup.indices.extend(indices.iter().map(|&i| base + i));
             }
-            soup.indices.extend(mesh.indices.iter().map(|&i| base + i));
         } else {
+            if soup.indices.capacity() == 0 {
+                soup.indices.reserve(total_indices);
+            }
             let mut offset = 0usize;
-            for &arity in &mesh.face_arities {
+            for &arity in &face_arities {
                 let n = arity as usize;
-                let Some(corners) = mesh.indices.get(offset..offset + n) else {
+                let Some(corners) = indices.get(offset..offset + n) else {
                     return Err(internal("face arities longer than its indices"));
                 };
                 offset += n;
@@ -812,7 +1127,7 @@ fn build_soup(models: Vec<tobj::Model>, warnings: &mut Vec<String>) -> Result<So
                         base + corners[2],
                     ]),
                     _ => triangulator.polygon(
-                        &mesh.positions,
+                        model_positions,
                         corners,
                         base,
                         &mut soup.indices,
@@ -820,7 +1135,7 @@ fn build_soup(models: Vec<tobj::Model>, warnings: &mut Vec<String>) -> Result<So
                     ),
                 }
             }
-            if offset != mesh.indices.len() {
+            if offset != indices.len() {
                 return Err(internal("indices not covered by face arities"));
             }
         }
@@ -867,6 +1182,27 @@ fn build_soup(models: Vec<tobj::Model>, warnings: &mut Vec<String>) -> Result<So
         ));
     }
     Ok(soup)
+}
+
+/// `flat` (x, y, z, x, y, z, ...) as points, reusing its allocation when
+/// that is possible (it always is with the system allocator).
+fn into_triples(mut flat: Vec<f32>) -> Vec<[f32; 3]> {
+    debug_assert!(flat.len().is_multiple_of(3));
+    // Shrinking gives the block back in place (no copy); the capacity must
+    // be a whole number of points for the block to be one of points.
+    flat.shrink_to_fit();
+    if flat.is_empty() || !flat.len().is_multiple_of(3) || !flat.capacity().is_multiple_of(3) {
+        return flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    }
+    let mut flat = std::mem::ManuallyDrop::new(flat);
+    let (ptr, len, capacity) = (flat.as_mut_ptr(), flat.len(), flat.capacity());
+    // SAFETY: `ptr` comes from a Vec<f32> with this capacity, allocated by the
+    // global allocator and no longer owned by it (ManuallyDrop). [f32; 3] has
+    // the alignment of f32, and `capacity / 3` of them take exactly the
+    // `capacity * 4` bytes the block was allocated with (capacity % 3 == 0),
+    // so the new Vec frees it with the same layout; its `len / 3` points are
+    // the initialised `len` floats.
+    unsafe { Vec::from_raw_parts(ptr.cast::<[f32; 3]>(), len / 3, capacity / 3) }
 }
 
 // ---------------------------------------------------------------------------
@@ -1441,6 +1777,172 @@ mod tests {
             }
         }
         assert!(tested > 1000, "only {tested} simple polygons");
+    }
+
+    #[test]
+    fn plain_ascii_and_newline_bits() {
+        let mut seed = 5u64;
+        for len in 0..70 {
+            for _ in 0..200 {
+                let bytes: Vec<u8> = (0..len)
+                    .map(|_| {
+                        seed = seed
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        // Rare NUL and non-ASCII bytes among ASCII ones.
+                        match (seed >> 40) % 64 {
+                            0 => 0,
+                            1 => 0x80 | (seed >> 20) as u8,
+                            2 => 1,
+                            3 => b'\n',
+                            r => b' ' + r as u8,
+                        }
+                    })
+                    .collect();
+                let expected = bytes.iter().all(|&b| b != 0 && b.is_ascii());
+                assert_eq!(plain_ascii(&bytes), expected, "{bytes:?}");
+                for bytes in [
+                    &bytes[..len.min(64)],
+                    &[&bytes[..], &[b'\n'; 64][..]].concat()[..64],
+                ] {
+                    let mask = bytes
+                        .iter()
+                        .enumerate()
+                        .filter(|&(_, &b)| b == b'\n')
+                        .fold(0u64, |m, (i, _)| m | 1 << i);
+                    assert_eq!(newline_bits(bytes), mask);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn find_newline_matches_a_byte_search() {
+        let mut seed = 3u64;
+        for len in 0..80 {
+            for _ in 0..50 {
+                let bytes: Vec<u8> = (0..len)
+                    .map(|_| {
+                        seed = seed
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        // Mostly bytes near '\n' (0x0A) and 0x0B, 0x09,
+                        // 0x8A, which a sloppy bit trick confuses with it.
+                        [b'\n', 0x0b, 0x09, 0x8a, 0x00, 0xff, b'a', b' '][(seed >> 40) as usize % 8]
+                    })
+                    .collect();
+                let expected = bytes.iter().position(|&b| b == b'\n');
+                assert_eq!(find_newline(&bytes), expected, "{bytes:?}");
+            }
+        }
+    }
+
+    fn debug_models(models: &[tobj::Model]) -> String {
+        format!("{models:?}")
+    }
+
+    /// The streaming path (pre-scan piece by piece as tobj reads) gives what
+    /// the whole-text path gives, also when continued lines, points and
+    /// blanked statements straddle the pieces' boundaries.
+    #[test]
+    fn streaming_matches_whole_text() {
+        let mut text = String::from("mtllib a.mtl\nusemtl\tx\n");
+        let mut k = 0usize;
+        while text.len() < 5 * PIECE {
+            k += 1;
+            text.push_str(&format!("v {k} {}.5 -{k}e-3\n", k % 7));
+            match k % 13 {
+                0 => text.push_str(&format!("f {k} \\\n  {} {}\n", k.max(3) - 1, k.max(3) - 2)),
+                1 => text.push_str("vt 0.5 0.5\nvn 0 0 1\n"),
+                2 => text.push_str("l 1 2 \\\n3\np 1 \\\n 2 3\n"),
+                3 => text.push_str(&format!("o part{k}\n# comment \\\n")),
+                4 => text.push_str(&format!("\tf {k} {} {}\r\n", k.max(3) - 1, k.max(3) - 2)),
+                5 => text.push_str(&format!(
+                    "f {k} {} {} {}\n",
+                    k.max(4) - 1,
+                    k.max(4) - 2,
+                    k.max(4) - 3
+                )),
+                _ => text.push_str(&format!("f {k} {} {}\n", k.max(3) - 1, k.max(3) - 2)),
+            }
+        }
+        let mut texts = vec![
+            text,
+            String::new(),
+            "v 1 2 3".into(),
+            "v 1 2 3\nv 4 5 6 \\".into(),
+        ];
+        // A continued statement whose first line ends just before, at and
+        // just after a piece's end.
+        let head = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+        for tail in [
+            "f 1 2 \\\n3\n",
+            "p 1 \\\n2\n",
+            "l 1 \\\n2 3\n",
+            "v 1 2 \\\n3\n",
+            "usemtl \\\nm\n",
+        ] {
+            let first_len = tail.find('\n').unwrap() + 1;
+            for shift in 0..5 {
+                let k = PIECE + shift - 2 - head.len() - first_len - 2;
+                texts.push(format!("{head}#{}\n{tail}f 1 2 3\n", "x".repeat(k)));
+            }
+        }
+        for text in &texts {
+            let data = text.as_bytes();
+            let streamed = parse_streaming(data).unwrap().expect("fast path");
+            let owned = parse_owned(data.to_vec()).unwrap();
+            assert_eq!(debug_models(&streamed.models), debug_models(&owned.models));
+            assert_eq!(streamed.scan.joins, owned.scan.joins);
+            let counts = |s: &Prescan| {
+                [
+                    s.vertices,
+                    s.faces,
+                    s.line_statements,
+                    s.point_statements,
+                    s.point_refs,
+                ]
+            };
+            assert_eq!(counts(&streamed.scan), counts(&owned.scan));
+            assert_eq!(streamed.warnings, owned.warnings);
+        }
+    }
+
+    /// Inputs the streaming path must hand over to the whole-text path.
+    #[test]
+    fn streaming_declines_what_needs_the_whole_text() {
+        let mut long = "v 0 0 0\n".repeat(PIECE / 4);
+        long.push_str("# caf\u{e9}\n");
+        let mut invalid = long.into_bytes();
+        let at = invalid.len() - 3;
+        invalid[at] = 0xff;
+        for data in [
+            &b"\xEF\xBB\xBFv 1 2 3\n"[..],
+            b"\xFF\xFEv\x00",
+            b"v 1 2 3\rv 4 5 6\r",
+            b"v 1 2 3\nv 1 2\n",
+            b"v 1 2 3\x00\n",
+            &invalid,
+        ] {
+            let streamed = parse_streaming(data).unwrap();
+            // A UTF-8 byte-order mark is simply skipped.
+            assert_eq!(streamed.is_some(), data.starts_with(b"\xEF"), "{data:?}");
+        }
+    }
+
+    #[test]
+    fn into_triples_keeps_the_points() {
+        for n in [0usize, 1, 2, 5, 1000] {
+            let mut flat = Vec::with_capacity(3 * n + 7);
+            flat.extend((0..3 * n).map(|i| i as f32));
+            let points = into_triples(flat);
+            assert_eq!(points.len(), n);
+            assert!(
+                points.iter().enumerate().all(
+                    |(i, p)| *p == [3.0 * i as f32, 3.0 * i as f32 + 1.0, 3.0 * i as f32 + 2.0]
+                )
+            );
+        }
     }
 
     #[test]
