@@ -4,7 +4,9 @@
 //!
 //! - `load/ours/*`: file read + OBJ/glTF decode through `svpack::load::load`,
 //!   and for OBJ the peer `load/tobj/*`: file read + `tobj::load_obj_buf` with
-//!   the options our loader uses (our overhead = ours / tobj − 1);
+//!   the options our loader uses (our overhead = ours / tobj − 1), and for
+//!   glTF the peer `load/gltf_crate/*`: the gltf crate's parse and its
+//!   accessor readers for every primitive's positions and indices;
 //! - `check/ours/*`: `build::check_soup` (indices in range, finite positions);
 //! - `weld/ours/*`: `weld::weld`;
 //! - `topology/ours/*`: `topology::build_edges` (edges and all opposite
@@ -122,6 +124,37 @@ fn payload(m: &Mesh) -> MeshPayload<'_> {
     }
 }
 
+/// The peer of our glTF loader: file read, `gltf::Gltf::from_slice`, buffers
+/// (the GLB blob or files beside the input), and the crate's readers for the
+/// positions and indices of every triangle primitive. Returns the counts.
+fn gltf_crate_load(path: &Path) -> (usize, usize) {
+    let bytes = std::fs::read(path).unwrap();
+    let doc = gltf::Gltf::from_slice(&bytes).unwrap();
+    let buffers: Vec<Vec<u8>> = doc
+        .buffers()
+        .map(|b| match b.source() {
+            gltf::buffer::Source::Bin => doc.blob.clone().unwrap(),
+            gltf::buffer::Source::Uri(uri) => {
+                std::fs::read(path.parent().unwrap().join(uri)).unwrap()
+            }
+        })
+        .collect();
+    let (mut positions, mut indices) = (0, 0);
+    for mesh in doc.meshes() {
+        for prim in mesh.primitives() {
+            let r = prim.reader(|b| Some(&buffers[b.index()]));
+            let p: Vec<[f32; 3]> = r.read_positions().unwrap().collect();
+            let i: Vec<u32> = match r.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..p.len() as u32).collect(),
+            };
+            positions += p.len();
+            indices += i.len();
+        }
+    }
+    (positions, indices)
+}
+
 fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
     let adapter = meshopt::VertexDataAdapter::new(
         meshopt::typed_to_bytes(positions),
@@ -154,6 +187,17 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
                 let mut reader = text.as_slice();
                 tobj::load_obj_buf(&mut reader, &options, |_| Ok(Default::default())).unwrap()
             })
+        });
+    }
+    // For glTF: the gltf crate's own parse (JSON, validation, GLB container)
+    // and its accessor readers for every primitive's positions and indices,
+    // i.e. the data a loader needs, without node transforms or diagnostics.
+    if m.path
+        .extension()
+        .is_some_and(|e| e == "glb" || e == "gltf")
+    {
+        g.bench_function(format!("gltf_crate/{n}"), |b| {
+            b.iter(|| gltf_crate_load(black_box(&m.path)))
         });
     }
     g.finish();
