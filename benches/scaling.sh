@@ -1,25 +1,61 @@
 #!/usr/bin/env bash
-# Build-time scaling on generated scenes (examples/scene.rs): for each
-# triangle count, generate the scene, run `svpack build --json` once and print
-# a markdown table of triangles, the build's own `time_ms` (load to written
-# file, as the CLI reports it) and ns per triangle. Prints only; asserts
-# nothing. Usage: bash benches/scaling.sh [N ...]  (default 10000 100000
-# 1000000 5000000). Honours CARGO_TARGET_DIR; scenes go to a temp directory
-# that is removed at exit.
+# Build-time scaling on generated scenes (examples/scene.rs) and, when
+# benches/fetch_dragon.sh has fetched it, the full Stanford dragon. For each
+# input, runs `svpack build --timings --json` with 1 and with 2 threads
+# (fastest of REPS runs each, default 3; outputs go to fresh paths and are
+# compared byte for byte) and prints a markdown table:
+#   triangles, whole build (1 thread), ns per triangle, the stages after
+#   parsing (weld + topology + layout + write) in ns per triangle, the same
+#   with 2 threads, and the 2-thread speed-ups of both.
+# Prints only; asserts nothing except identical outputs.
+# Usage: bash benches/scaling.sh [N ...]  (default 10000 100000 1000000
+# 5000000). Honours CARGO_TARGET_DIR and REPS; scenes go to a temp directory
+# removed at exit.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 counts=("$@")
 [ ${#counts[@]} -gt 0 ] || counts=(10000 100000 1000000 5000000)
+reps="${REPS:-3}"
 target="${CARGO_TARGET_DIR:-target}"
 cargo build --release --quiet --bin svpack --example scene
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
-echo "| triangles | time_ms | ns/triangle |"
-echo "|---:|---:|---:|"
+
+# fastest THREADS INPUT -> "total_ms after_parse_ms" (minimum of each over REPS)
+fastest() {
+  local best_total="" best_after="" i
+  for i in $(seq "$reps"); do
+    rm -f "$work/out_$1.svpk"
+    "$target/release/svpack" build "$2" -o "$work/out_$1.svpk" --threads "$1" --timings --json -q \
+      >"$work/t.json"
+    read -r total after < <(python3 -c '
+import json, sys
+t = json.load(open(sys.argv[1]))["timings_ms"]
+print(t["total"], t["weld"] + t["topology"] + t["layout"] + t["write"])' "$work/t.json")
+    best_total=$(python3 -c "print(min(float('$total'), float('${best_total:-inf}')))")
+    best_after=$(python3 -c "print(min(float('$after'), float('${best_after:-inf}')))")
+  done
+  echo "$best_total $best_after"
+}
+
+row() { # NAME TRIANGLES INPUT
+  read -r t1 a1 < <(fastest 1 "$3")
+  read -r t2 a2 < <(fastest 2 "$3")
+  cmp -s "$work/out_1.svpk" "$work/out_2.svpk" || { echo "$1: outputs differ between 1 and 2 threads" >&2; exit 1; }
+  python3 -c '
+import sys
+name, n, t1, a1, t2, a2 = sys.argv[1], int(sys.argv[2]), *map(float, sys.argv[3:])
+print(f"| {name} | {n:,} | {t1:.1f} ms | {t1 * 1e6 / n:.0f} | {a1 * 1e6 / n:.0f} | {a2 * 1e6 / n:.0f} | {t1 / t2:.2f}x | {a1 / a2:.2f}x |")' \
+    "$1" "$2" "$t1" "$a1" "$t2" "$a2"
+}
+
+echo "| input | triangles | build, 1 thread | ns/tri | after parsing, ns/tri (1 thread) | after parsing, ns/tri (2 threads) | 2-thread speed-up, whole | 2-thread speed-up, after parsing |"
+echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 for n in "${counts[@]}"; do
   "$target/release/examples/scene" "$n" "$work/scene_$n.obj" 2>/dev/null
-  "$target/release/svpack" build "$work/scene_$n.obj" -o "$work/x.svpk" --json >"$work/out.json"
-  ms="$(sed -n 's/^ *"time_ms": *\([0-9.eE+-]*\).*/\1/p' "$work/out.json" | head -n 1)"
-  awk -v n="$n" -v ms="$ms" 'BEGIN { printf "| %d | %.1f | %.1f |\n", n, ms, ms * 1e6 / n }'
-  rm -f "$work/scene_$n.obj" "$work/x.svpk"
+  row "scene" "$n" "$work/scene_$n.obj"
+  rm -f "$work/scene_$n.obj"
 done
+if [ -s target/dragon/dragon.obj ]; then
+  row "Stanford dragon" 871414 target/dragon/dragon.obj
+fi

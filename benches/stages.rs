@@ -4,7 +4,9 @@
 //!
 //! - `load/ours/*`: file read + OBJ/glTF decode through `svpack::load::load`,
 //!   and for OBJ the peer `load/tobj/*`: file read + `tobj::load_obj_buf` with
-//!   the options our loader uses (our overhead = ours / tobj − 1);
+//!   the options our loader uses (our overhead = ours / tobj − 1), and for
+//!   glTF the peer `load/gltf_crate/*`: the gltf crate's parse and its
+//!   accessor readers for every primitive's positions and indices;
 //! - `check/ours/*`: `build::check_soup` (indices in range, finite positions);
 //! - `weld/ours/*`: `weld::weld`;
 //! - `topology/ours/*`: `topology::build_edges` (edges and all opposite
@@ -13,14 +15,23 @@
 //!   (`meshopt::generate_adjacency_indices`) on the same welded positions
 //!   and indices;
 //! - `layout/ours/*`: `layout::layout` (side buckets and caps, K = 5);
+//! - `layout/floor_fill/*`: allocating and filling as many fresh bytes as the
+//!   layout produces (the memory-bandwidth floor of the layout stage);
 //! - `write/memory/*` and `write/file/*`: container serialisation
-//!   (`format::encode_to` into a Vec, `format::write_file` to a temp file);
+//!   (`format::encode_to` into a Vec, `format::write_file` to a temp file),
+//!   and `write/floor_file/*`: writing the same number of ready bytes to a
+//!   temp file and renaming it (the page-cache floor of the write stage);
 //! - `evaluate/reference_1t/*`: the CPU evaluator (reference strategy, one
 //!   light, every side bucket and the caps) inside a 1-thread rayon pool;
 //! - `weld+topology+layout/ours/*`: `build::build_soup` from the loaded soup,
 //!   against `weld+topology+layout/meshopt_adjacency/*`: meshoptimizer's
 //!   adjacency from the same unwelded soup (it does its own position
 //!   matching), i.e. "soup in, adjacency out" for both.
+//!
+//! Inputs: dragon_res4, armadillo and 2CylinderEngine from ../shared/meshes,
+//! the full Stanford dragon when `benches/fetch_dragon.sh` has fetched it,
+//! and a generated scene of `SVPACK_BENCH_SCENE` triangles (default 1M).
+//! `SVPACK_BENCH_ONLY=dragon_full,scene_1000k` keeps only the named inputs.
 //!
 //! `cargo bench --bench stages -- --warm-up-time 1 --measurement-time 3`;
 //! a filter such as `topology/` runs one group.
@@ -36,6 +47,10 @@ use svpack::layout::{self, DEFAULT_MAX_MULT, Layout};
 use svpack::load::{self, Soup};
 use svpack::topology::{self, Edges};
 use svpack::weld::{self, Welded};
+
+/// The allocator `svpack` itself runs with, so stage times match the CLI's.
+#[global_allocator]
+static ALLOC: svpack::alloc::HugePageAlloc = svpack::alloc::HugePageAlloc;
 
 #[path = "../examples/scene.rs"]
 mod scene;
@@ -109,6 +124,37 @@ fn payload(m: &Mesh) -> MeshPayload<'_> {
     }
 }
 
+/// The peer of our glTF loader: file read, `gltf::Gltf::from_slice`, buffers
+/// (the GLB blob or files beside the input), and the crate's readers for the
+/// positions and indices of every triangle primitive. Returns the counts.
+fn gltf_crate_load(path: &Path) -> (usize, usize) {
+    let bytes = std::fs::read(path).unwrap();
+    let doc = gltf::Gltf::from_slice(&bytes).unwrap();
+    let buffers: Vec<Vec<u8>> = doc
+        .buffers()
+        .map(|b| match b.source() {
+            gltf::buffer::Source::Bin => doc.blob.clone().unwrap(),
+            gltf::buffer::Source::Uri(uri) => {
+                std::fs::read(path.parent().unwrap().join(uri)).unwrap()
+            }
+        })
+        .collect();
+    let (mut positions, mut indices) = (0, 0);
+    for mesh in doc.meshes() {
+        for prim in mesh.primitives() {
+            let r = prim.reader(|b| Some(&buffers[b.index()]));
+            let p: Vec<[f32; 3]> = r.read_positions().unwrap().collect();
+            let i: Vec<u32> = match r.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..p.len() as u32).collect(),
+            };
+            positions += p.len();
+            indices += i.len();
+        }
+    }
+    (positions, indices)
+}
+
 fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
     let adapter = meshopt::VertexDataAdapter::new(
         meshopt::typed_to_bytes(positions),
@@ -141,6 +187,17 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
                 let mut reader = text.as_slice();
                 tobj::load_obj_buf(&mut reader, &options, |_| Ok(Default::default())).unwrap()
             })
+        });
+    }
+    // For glTF: the gltf crate's own parse (JSON, validation, GLB container)
+    // and its accessor readers for every primitive's positions and indices,
+    // i.e. the data a loader needs, without node transforms or diagnostics.
+    if m.path
+        .extension()
+        .is_some_and(|e| e == "glb" || e == "gltf")
+    {
+        g.bench_function(format!("gltf_crate/{n}"), |b| {
+            b.iter(|| gltf_crate_load(black_box(&m.path)))
         });
     }
     g.finish();
@@ -178,6 +235,12 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     g.bench_function(format!("ours/{n}"), |b| {
         b.iter(|| layout::layout(black_box(&m.welded), black_box(&m.edges), DEFAULT_MAX_MULT))
     });
+    // Floor: allocating and filling as many fresh bytes as the layout
+    // produces, with nothing to compute.
+    let layout_bytes = (m.layout.caps_bytes() + m.layout.sides_bytes()) as usize;
+    g.bench_function(format!("floor_fill/{n}"), |b| {
+        b.iter(|| vec![1u8; black_box(layout_bytes)])
+    });
     g.finish();
 
     let mut g = group(c, "write", m);
@@ -192,6 +255,17 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     let out = scratch.join(format!("{n}.write.svpk"));
     g.bench_function(format!("file/{n}"), |b| {
         b.iter(|| format::write_file(&out, m.header.clone(), &[payload(m)], false).unwrap())
+    });
+    // Floor: the same number of bytes, already encoded, written the same way
+    // (temp file in the same directory, renamed over the previous output).
+    let bytes = vec![1u8; buf.len()];
+    let floor_out = scratch.join(format!("{n}.floor.bin"));
+    g.bench_function(format!("floor_file/{n}"), |b| {
+        b.iter(|| {
+            let tmp = tempfile::NamedTempFile::new_in(scratch).unwrap();
+            std::io::Write::write_all(&mut tmp.as_file(), black_box(&bytes)).unwrap();
+            tmp.persist(&floor_out).unwrap();
+        })
     });
     g.finish();
 
@@ -252,10 +326,32 @@ fn stages(c: &mut Criterion) {
             eprintln!("skipping {name}: {} is absent", p.display());
         }
     }
-    let scene = scratch.path().join("scene_1m.obj");
+    // The full Stanford dragon (871k triangles) when benches/fetch_dragon.sh
+    // has fetched it.
+    let dragon = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/dragon/dragon.obj");
+    if dragon.exists() {
+        inputs.push(("dragon_full".into(), dragon));
+    } else {
+        eprintln!(
+            "skipping dragon_full: run benches/fetch_dragon.sh to fetch {}",
+            dragon.display()
+        );
+    }
+    // SVPACK_BENCH_SCENE=N sets the generated scene's size (default 1M).
+    let scene_triangles = std::env::var("SVPACK_BENCH_SCENE")
+        .ok()
+        .map(|v| v.parse().expect("SVPACK_BENCH_SCENE: a triangle count"))
+        .unwrap_or(SCENE_TRIANGLES);
+    let scene_name = format!("scene_{}k", scene_triangles / 1000);
+    let scene = scratch.path().join(format!("{scene_name}.obj"));
     let file = std::fs::File::create(&scene).unwrap();
-    scene::write_scene(std::io::BufWriter::new(file), SCENE_TRIANGLES).unwrap();
-    inputs.push(("scene_1m".into(), scene));
+    scene::write_scene(std::io::BufWriter::new(file), scene_triangles).unwrap();
+    inputs.push((scene_name, scene));
+    // SVPACK_BENCH_ONLY=name,name keeps only those inputs.
+    if let Ok(only) = std::env::var("SVPACK_BENCH_ONLY") {
+        let keep: Vec<&str> = only.split(',').collect();
+        inputs.retain(|(name, _)| keep.contains(&name.as_str()));
+    }
     for (name, path) in &inputs {
         let m = prepare(name, path, scratch.path());
         bench_mesh(c, &m, scratch.path());

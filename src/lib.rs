@@ -2,6 +2,7 @@
 //!
 //! Data path: [`load`] → [`weld`] → [`topology`] → [`layout`] → [`format`].
 pub mod accuracy;
+pub mod alloc;
 pub mod build;
 pub mod error;
 pub mod evaluate;

@@ -10,6 +10,10 @@ use svpack::build::BuildConfig;
 use svpack::layout::{DEFAULT_MAX_MULT, MAX_MAX_MULT};
 use svpack::report::Summary;
 
+/// Large buffers ask for transparent huge pages (see `svpack::alloc`).
+#[global_allocator]
+static ALLOC: svpack::alloc::HugePageAlloc = svpack::alloc::HugePageAlloc;
+
 /// Progress bars on stderr (indicatif hides them when stderr is not a terminal).
 mod progress {
     use indicatif::{ProgressBar, ProgressStyle};

@@ -7,8 +7,6 @@
 //! integers. It also makes the welded vertex numbering independent of how the
 //! input happened to order its vertices.
 
-use rustc_hash::FxHashMap;
-
 /// Result of [`weld`].
 #[derive(Debug, Clone, Default)]
 pub struct Welded {
@@ -58,75 +56,103 @@ fn order_key(v: f32) -> u32 {
     }
 }
 
+/// Triangles per parallel block of the degenerate filter.
+const TRI_BLOCK: usize = 1 << 14;
+
+/// One sortable word per input vertex: the position's order key in the high
+/// 96 bits, the vertex's input index in the low 32. Sorting these words sorts
+/// by position, and equal positions by index, so the order is total and no
+/// two words are equal.
 #[inline(always)]
-fn position_key(p: [f32; 3]) -> u128 {
-    ((order_key(p[0]) as u128) << 64) | ((order_key(p[1]) as u128) << 32) | order_key(p[2]) as u128
+fn vertex_word(p: [f32; 3], index: usize) -> u128 {
+    ((order_key(canonical(p[0])) as u128) << 96)
+        | ((order_key(canonical(p[1])) as u128) << 64)
+        | ((order_key(canonical(p[2])) as u128) << 32)
+        | index as u128
 }
 
 /// Welds the soup `positions`/`indices` (3 indices per triangle, all in range,
-/// all positions finite). Drops triangles with two equal welded corners.
+/// all positions used by a triangle finite). Drops triangles with two equal
+/// welded corners.
+///
+/// Method: one sort. Every input vertex becomes a 128-bit word (position key
+/// above index, [`vertex_word`]); after sorting, runs of equal position keys
+/// are the welded vertices, already in lexicographic order, so numbering the
+/// runs welds and orders in one pass. A hash map of positions followed by a
+/// sort of the distinct ones did the same work twice, with a cache miss per
+/// vertex in the map.
 pub fn weld(positions: &[[f32; 3]], indices: &[u32]) -> Welded {
-    // 1. Distinct canonical positions among referenced vertices, by hashing the
-    //    bit patterns (exact equality is what we want, not a tolerance).
-    let mut first_id: Vec<u32> = vec![u32::MAX; positions.len()];
-    let mut unique: Vec<[f32; 3]> = Vec::new();
-    let mut map: FxHashMap<[u32; 3], u32> = FxHashMap::default();
-    for &i in indices {
-        let i = i as usize;
-        if first_id[i] != u32::MAX {
-            continue;
-        }
-        let p = positions[i].map(canonical);
-        let key = p.map(f32::to_bits);
-        let next = unique.len() as u32;
-        let id = *map.entry(key).or_insert_with(|| {
-            unique.push(p);
-            next
-        });
-        first_id[i] = id;
-    }
-    drop(map);
-
-    // 2. Keep non-degenerate triangles (in unique-id space).
-    let tri_count = indices.len() / 3;
-    let mut triangles = Vec::with_capacity(indices.len());
-    let mut source_triangle = Vec::with_capacity(tri_count);
-    let mut used = vec![false; unique.len()];
-    let mut degenerate = 0u64;
-    for (t, c) in indices.chunks_exact(3).enumerate() {
-        let (a, b, d) = (
-            first_id[c[0] as usize],
-            first_id[c[1] as usize],
-            first_id[c[2] as usize],
-        );
-        if a == b || b == d || a == d {
-            degenerate += 1;
-            continue;
-        }
-        triangles.extend_from_slice(&[a, b, d]);
-        source_triangle.push(t as u32);
-        used[a as usize] = true;
-        used[b as usize] = true;
-        used[d as usize] = true;
-    }
-
-    // 3. Sort the used distinct positions lexicographically and renumber.
-    let mut order: Vec<(u128, u32)> = unique
-        .iter()
+    use rayon::prelude::*;
+    // 1. Sort all input vertices by position. Words are distinct, so the
+    //    parallel unstable sort has one possible result whatever the threads.
+    let mut words: Vec<u128> = positions
+        .par_iter()
         .enumerate()
-        .filter(|(i, _)| used[*i])
-        .map(|(i, &p)| (position_key(p), i as u32))
+        .map(|(i, &p)| vertex_word(p, i))
         .collect();
-    // Keys are distinct, so the parallel sort is deterministic.
-    rayon::slice::ParallelSliceMut::par_sort_unstable_by_key(&mut order[..], |e| e.0);
-    let mut rank = vec![u32::MAX; unique.len()];
-    let mut out_positions = Vec::with_capacity(order.len());
-    for (r, &(_, i)) in order.iter().enumerate() {
-        rank[i as usize] = r as u32;
-        out_positions.push(unique[i as usize]);
+    words.par_sort_unstable();
+
+    // 2. Number the runs of equal positions: `run[i]` is input vertex i's
+    //    welded id before unused vertices are removed.
+    let mut run = vec![0u32; positions.len()];
+    let mut run_first: Vec<u32> = Vec::with_capacity(positions.len());
+    let mut prev_key = None;
+    for &w in &words {
+        let key = w >> 32;
+        if prev_key != Some(key) {
+            prev_key = Some(key);
+            run_first.push(w as u32);
+        }
+        run[w as u32 as usize] = run_first.len() as u32 - 1;
     }
-    for v in triangles.iter_mut() {
-        *v = rank[*v as usize];
+    drop(words);
+
+    // 3. Keep non-degenerate triangles, in run ids, in input order: fixed
+    //    blocks in parallel, concatenated in block order.
+    let kept: Vec<(Vec<u32>, Vec<u32>)> = indices
+        .par_chunks(3 * TRI_BLOCK)
+        .enumerate()
+        .map(|(blk, block)| {
+            let mut tris = Vec::with_capacity(block.len());
+            let mut source = Vec::with_capacity(block.len() / 3);
+            for (i, c) in block.chunks_exact(3).enumerate() {
+                let (a, b, d) = (run[c[0] as usize], run[c[1] as usize], run[c[2] as usize]);
+                if a != b && b != d && a != d {
+                    tris.extend_from_slice(&[a, b, d]);
+                    source.push((blk * TRI_BLOCK + i) as u32);
+                }
+            }
+            (tris, source)
+        })
+        .collect();
+    let kept_count: usize = kept.iter().map(|k| k.1.len()).sum();
+    let degenerate = (indices.len() / 3 - kept_count) as u64;
+    let mut triangles = Vec::with_capacity(3 * kept_count);
+    let mut source_triangle = Vec::with_capacity(kept_count);
+    for (tris, source) in kept {
+        triangles.extend_from_slice(&tris);
+        source_triangle.extend_from_slice(&source);
+    }
+    let mut used = vec![false; run_first.len()];
+    for &v in &triangles {
+        used[v as usize] = true;
+    }
+    drop(run);
+
+    // 4. Drop unused runs (vertices no kept triangle references) and renumber
+    //    densely; the order stays lexicographic.
+    let mut rank = vec![u32::MAX; run_first.len()];
+    let mut out_positions = Vec::with_capacity(run_first.len());
+    for (r, &first) in run_first.iter().enumerate() {
+        if used[r] {
+            rank[r] = out_positions.len() as u32;
+            out_positions.push(positions[first as usize].map(canonical));
+        }
+    }
+    if out_positions.len() != run_first.len() {
+        triangles
+            .par_iter_mut()
+            .for_each(|v| *v = rank[*v as usize]);
     }
 
     Welded {
@@ -185,6 +211,68 @@ mod tests {
         assert_eq!(w.triangle_count(), 1);
         assert_eq!(w.positions.len(), 3);
         assert_eq!(w.source_triangle, vec![0]);
+    }
+
+    /// The obvious implementation: a sorted map of canonical positions.
+    fn naive(pos: &[[f32; 3]], idx: &[u32]) -> Welded {
+        use std::collections::BTreeMap;
+        let key = |i: u32| pos[i as usize].map(canonical).map(order_key);
+        let mut kept = Vec::new();
+        let mut out = Welded::default();
+        for (t, c) in idx.chunks_exact(3).enumerate() {
+            let k = [key(c[0]), key(c[1]), key(c[2])];
+            if k[0] == k[1] || k[1] == k[2] || k[0] == k[2] {
+                out.degenerate += 1;
+            } else {
+                kept.push((t as u32, c));
+            }
+        }
+        let mut ids: BTreeMap<[u32; 3], u32> = BTreeMap::new();
+        for (_, c) in &kept {
+            for &i in c.iter() {
+                ids.insert(key(i), 0);
+            }
+        }
+        for (n, (k, id)) in ids.iter_mut().enumerate() {
+            *id = n as u32;
+            let first = (0..pos.len() as u32).find(|&i| key(i) == *k).unwrap();
+            out.positions.push(pos[first as usize].map(canonical));
+        }
+        for (t, c) in kept {
+            out.triangles.extend(c.iter().map(|&i| ids[&key(i)]));
+            out.source_triangle.push(t);
+        }
+        out
+    }
+
+    #[test]
+    fn matches_the_obvious_implementation() {
+        // A lattice small enough that positions repeat (weld), with -0.0,
+        // degenerate triangles, an unused and a NaN unreferenced vertex, and
+        // more triangles than one parallel block.
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed >> 11
+        };
+        let coord = |r: u64| [-1.0, -0.0, 0.0, 0.5, 1.0, 2.0][(r % 6) as usize];
+        let mut pos: Vec<[f32; 3]> = (0..400)
+            .map(|_| [coord(rng()), coord(rng()), coord(rng())])
+            .collect();
+        pos.push([9.0, 9.0, 9.0]); // never referenced
+        pos.push([f32::NAN, 0.0, 0.0]); // never referenced
+        let idx: Vec<u32> = (0..3 * (TRI_BLOCK + 999))
+            .map(|_| (rng() % 400) as u32)
+            .collect();
+        let w = weld(&pos, &idx);
+        let n = naive(&pos, &idx);
+        assert!(w.degenerate > 0 && w.positions.len() < 400);
+        assert_eq!(w.positions, n.positions);
+        assert_eq!(w.triangles, n.triangles);
+        assert_eq!(w.source_triangle, n.source_triangle);
+        assert_eq!(w.degenerate, n.degenerate);
     }
 
     #[test]
