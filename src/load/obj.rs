@@ -1188,21 +1188,11 @@ fn build_soup(models: Vec<tobj::Model>, warnings: &mut Vec<String>) -> Result<So
 /// that is possible (it always is with the system allocator).
 fn into_triples(mut flat: Vec<f32>) -> Vec<[f32; 3]> {
     debug_assert!(flat.len().is_multiple_of(3));
-    // Shrinking gives the block back in place (no copy); the capacity must
-    // be a whole number of points for the block to be one of points.
+    // Shrinking gives the block back in place (no copy); bytemuck reuses the
+    // block when its capacity is a whole number of points.
     flat.shrink_to_fit();
-    if flat.is_empty() || !flat.len().is_multiple_of(3) || !flat.capacity().is_multiple_of(3) {
-        return flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    }
-    let mut flat = std::mem::ManuallyDrop::new(flat);
-    let (ptr, len, capacity) = (flat.as_mut_ptr(), flat.len(), flat.capacity());
-    // SAFETY: `ptr` comes from a Vec<f32> with this capacity, allocated by the
-    // global allocator and no longer owned by it (ManuallyDrop). [f32; 3] has
-    // the alignment of f32, and `capacity / 3` of them take exactly the
-    // `capacity * 4` bytes the block was allocated with (capacity % 3 == 0),
-    // so the new Vec frees it with the same layout; its `len / 3` points are
-    // the initialised `len` floats.
-    unsafe { Vec::from_raw_parts(ptr.cast::<[f32; 3]>(), len / 3, capacity / 3) }
+    bytemuck::allocation::try_cast_vec(flat)
+        .unwrap_or_else(|(_, flat)| flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
 // ---------------------------------------------------------------------------
