@@ -1,7 +1,8 @@
 //! CPU evaluator throughput: ns per side record and per cap triangle, single
 //! thread, reference edge (the format's contract) against Kim 2008's per-edge
-//! light plane as the peer, on a real model (stanford-bunny from
-//! ../shared/meshes when present) and a generated sphere.
+//! light plane as the peer, on real models (stanford-bunny from
+//! ../shared/meshes when present, the full Stanford dragon when
+//! benches/fetch_dragon.sh has fetched it) and a generated sphere.
 //!
 //! Also the shared evaluator `verify` uses (triangles once, sides as sums of
 //! their signs), per side record.
@@ -160,6 +161,14 @@ fn evaluator(c: &mut Criterion) {
         bench_file(c, "bunny", &bunny);
     } else {
         eprintln!("skipping bunny: {} is absent", bunny.display());
+    }
+    // The full Stanford dragon (871k triangles), when benches/fetch_dragon.sh
+    // has fetched it.
+    let dragon = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/dragon/dragon.obj");
+    if dragon.exists() {
+        bench_file(c, "dragon_full", &dragon);
+    } else {
+        eprintln!("skipping dragon_full: run benches/fetch_dragon.sh");
     }
 }
 
