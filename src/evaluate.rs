@@ -13,7 +13,7 @@
 //! every record's result depends on that record alone, so results do not
 //! depend on the thread count.
 
-use crate::multiplicity::{Light, ref_sign, sort3, tri_sign};
+use crate::multiplicity::{Light, lex_less_nb, ref_sign, sort3, tri_sign};
 
 /// How multiplicities and cap orientations are computed. Only
 /// [`Strategy::Reference`] is the format's contract (what the shaders do);
@@ -112,13 +112,6 @@ pub fn reference_side_sign(a: [f32; 3], b: [f32; 3], o: [f32; 3], l: Light) -> i
     };
     let parity = if before | after { 1 } else { -1 };
     parity * ref_sign(r0, r1, r2, l)
-}
-
-/// [`crate::multiplicity::lex_less`] without short-circuit evaluation, so
-/// the compiler can use flag arithmetic instead of branches.
-#[inline(always)]
-fn lex_less_nb(a: [f32; 3], b: [f32; 3]) -> bool {
-    (a[0] < b[0]) | ((a[0] == b[0]) & ((a[1] < b[1]) | ((a[1] == b[1]) & (a[2] < b[2]))))
 }
 
 /// Pečiva 2013: Kim's test on all three edges of the triangle in one fixed

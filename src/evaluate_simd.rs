@@ -1,7 +1,7 @@
 //! Vectorised kernels for [`Strategy::Reference`](crate::evaluate::Strategy),
 //! bit for bit the contract of format-spec/multiplicity.md.
 //!
-//! Why a second transcription of the contract: the scalar one
+//! Why a second control flow for the contract: the scalar one
 //! ([`crate::multiplicity::tri_sign`]) sorts the corners with branches and
 //! leaves early when the light is on a corner. On a mesh the corner order is
 //! data-dependent, so those branches mispredict about once per triangle and
@@ -11,11 +11,13 @@
 //! ([`lex_less_nb`] is `lex_less` without short-circuit, equal on every
 //! input, NaN and ±0.0 included), the parity is the XOR of the three swap
 //! decisions, and the light-on-corner test is a mask applied at the end. The
-//! float expression is the contract's, operation by operation, in the same
-//! order: IEEE `+ − ×` are exact functions of their operands whether computed
-//! one at a time or eight per instruction, and Rust never contracts `a * b + c`
-//! into a fused multiply-add or reassociates a sum on its own. So each lane
-//! rounds exactly as the shaders and [`crate::multiplicity::ref_sign`] do.
+//! float expression is not restated: it is
+//! [`crate::multiplicity::ref_expr`], the one Rust transcription of the
+//! contract, inlined into each lane. IEEE `+ − ×` are exact functions of
+//! their operands whether computed one at a time or eight per instruction,
+//! and Rust never contracts `a * b + c` into a fused multiply-add or
+//! reassociates a sum on its own, so each lane rounds exactly as the shaders
+//! and [`crate::multiplicity::ref_sign`] do.
 //!
 //! Each loop is compiled twice: plainly (SSE2 on x86-64, whatever the target
 //! has elsewhere) and with AVX2 (8 lanes), chosen at run time. The `fma`
@@ -24,16 +26,7 @@
 //! differently. The tests call both versions and compare them with the scalar
 //! contract on random and adversarial inputs.
 
-use crate::multiplicity::Light;
-
-/// `lex_less(a, b)` ([`crate::multiplicity::lex_less`]) with `&`/`|` instead
-/// of early returns, so it compiles to masks. Same truth table for every
-/// input: `a < b` and `a == b` are both false when either is NaN, exactly
-/// like the `!=` then `<` of the scalar version, and `-0.0 == 0.0` in both.
-#[inline(always)]
-fn lex_less_nb(a: [f32; 3], b: [f32; 3]) -> bool {
-    (a[0] < b[0]) | ((a[0] == b[0]) & ((a[1] < b[1]) | ((a[1] == b[1]) & (a[2] < b[2]))))
-}
+use crate::multiplicity::{Light, lex_less_nb};
 
 /// `if m { x } else { y }` per coordinate: a select (blend), never a branch.
 #[inline(always)]
@@ -66,20 +59,8 @@ pub fn tri_sign_nb(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
     let lp = [l[0], l[1], l[2]];
     let eq = |p: [f32; 3]| (p[0] == lp[0]) & (p[1] == lp[1]) & (p[2] == lp[2]);
     let on_corner = (l[3] == 1.0) & (eq(p0) | eq(p1) | eq(p2));
-    // ref_sign's expression, in its order.
-    let x0 = r2[0] - r0[0];
-    let x1 = r2[1] - r0[1];
-    let x2 = r2[2] - r0[2];
-    let y0 = l[0] - r0[0] * l[3];
-    let y1 = l[1] - r0[1] * l[3];
-    let y2 = l[2] - r0[2] * l[3];
-    let d0 = r1[0] - r0[0];
-    let d1 = r1[1] - r0[1];
-    let d2 = r1[2] - r0[2];
-    let n0 = x1 * y2 - x2 * y1;
-    let n1 = x2 * y0 - x0 * y2;
-    let n2 = x0 * y1 - x1 * y0;
-    let s = (n0 * d0 + n1 * d1) + n2 * d2;
+    // The contract's expression, written once (multiplicity::ref_expr).
+    let s = crate::multiplicity::ref_expr(r0, r1, r2, l);
     let sign = (s > 0.0) as i32 - (s < 0.0) as i32;
     let sign = if odd { -sign } else { sign };
     if on_corner { 0 } else { sign }

@@ -35,6 +35,15 @@ pub fn lex_less(a: [f32; 3], b: [f32; 3]) -> bool {
     a[2] < b[2]
 }
 
+/// [`lex_less`] with `&`/`|` instead of early returns, so it compiles to
+/// flag arithmetic or vector masks instead of branches. Same truth table for
+/// every input: `a < b` and `a == b` are both false when either is NaN,
+/// exactly like the `!=` then `<` of [`lex_less`], and `-0.0 == 0.0` in both.
+#[inline(always)]
+pub fn lex_less_nb(a: [f32; 3], b: [f32; 3]) -> bool {
+    (a[0] < b[0]) | ((a[0] == b[0]) & ((a[1] < b[1]) | ((a[1] == b[1]) & (a[2] < b[2]))))
+}
+
 /// Sign (−1, 0, +1) of the reference expression on sorted corners
 /// `r0 < r1 < r2`: `((r2 − r0) × (L.xyz − r0·L.w)) · (r1 − r0)`, each
 /// operation rounded to f32 in exactly this order (see the spec, §2).
@@ -49,6 +58,18 @@ pub fn ref_sign(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], l: Light) -> i32 {
     {
         return 0;
     }
+    let s = ref_expr(r0, r1, r2, l);
+    (s > 0.0) as i32 - (s < 0.0) as i32
+}
+
+/// The reference expression itself, `((r2 − r0) × (L.xyz − r0·L.w)) · (r1 −
+/// r0)`, each operation rounded to f32 in exactly this order (spec §2),
+/// without the light-on-corner test. The one transcription of the float
+/// contract in Rust: [`ref_sign`] and the vectorised kernels of
+/// [`crate::evaluate_simd`] both call it (inlined, so the kernels' lanes
+/// compute these operations in this order).
+#[inline(always)]
+pub fn ref_expr(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], l: Light) -> f32 {
     // x = reference edge r0 → r2
     let x0 = r2[0] - r0[0];
     let x1 = r2[1] - r0[1];
@@ -65,8 +86,7 @@ pub fn ref_sign(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], l: Light) -> i32 {
     let n0 = x1 * y2 - x2 * y1;
     let n1 = x2 * y0 - x0 * y2;
     let n2 = x0 * y1 - x1 * y0;
-    let s = (n0 * d0 + n1 * d1) + n2 * d2;
-    (s > 0.0) as i32 - (s < 0.0) as i32
+    (n0 * d0 + n1 * d1) + n2 * d2
 }
 
 /// Orientation (−1, 0, +1) of the ordered triangle `(p0, p1, p2)` as seen from

@@ -231,17 +231,27 @@ fn sort_partition(
             *slot += 1;
         }
     }
-    // Per smaller endpoint, sort by (larger endpoint, triangle). A triangle
-    // has at most one half-edge per vertex pair, so the keys are distinct and
-    // the unstable sort gives exactly the stable order by larger endpoint
-    // (records arrive in triangle order). The runs are the vertex valence, a
-    // handful of records on real meshes, which the standard library sorts
-    // with branch-free sorting networks; an insertion sort mispredicted about
-    // one branch per record here.
+    // Per smaller endpoint, order the records by larger endpoint, keeping
+    // triangle order among equal ones. The runs are the vertex valence, a
+    // handful of records on real meshes: an inline insertion sort (stable)
+    // for those; longer runs (fans, dense CAD vertices) use the standard
+    // library's unstable sort on (larger endpoint, triangle), which gives the
+    // same order because a triangle has at most one half-edge per vertex pair,
+    // so the keys are distinct.
     let mut edges = 0;
     for v in 0..PART {
         let run = &mut scratch[start[v] as usize..start[v + 1] as usize];
-        run.sort_unstable_by_key(|r| (u64::from(r[1]) << 32) | u64::from(r[3]));
+        if run.len() <= 8 {
+            for i in 1..run.len() {
+                let mut j = i;
+                while j > 0 && run[j - 1][1] > run[j][1] {
+                    run.swap(j - 1, j);
+                    j -= 1;
+                }
+            }
+        } else {
+            run.sort_unstable_by_key(|r| (u64::from(r[1]) << 32) | u64::from(r[3]));
+        }
         edges += run.len().min(1)
             + run
                 .windows(2)

@@ -100,10 +100,7 @@ fn glsl_and_rust_use_the_same_operation_order() {
         ("floatnx=x.y*y.z-x.z*y.y;", "letn0=x1*y2-x2*y1;"),
         ("floatny=x.z*y.x-x.x*y.z;", "letn1=x2*y0-x0*y2;"),
         ("floatnz=x.x*y.y-x.y*y.x;", "letn2=x0*y1-x1*y0;"),
-        (
-            "floats=(nx*d.x+ny*d.y)+nz*d.z;",
-            "lets=(n0*d0+n1*d1)+n2*d2;",
-        ),
+        ("floats=(nx*d.x+ny*d.y)+nz*d.z;", "(n0*d0+n1*d1)+n2*d2"),
     ];
     let (mut gi, mut ri) = (0, 0);
     for (g, r) in ops {
