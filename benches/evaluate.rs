@@ -92,6 +92,27 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // computation through the loops it had before the vectorised kernel and
     // gather (scalar caps, one checked `caps.get` per slot).
     g.throughput(Throughput::Elements(records as u64));
+    // Floor of the shared evaluation: reading the bytes it must read (every
+    // cap record once, the side slots' triangle ids and parities) with
+    // nothing computed, per side record. On a mesh larger than the caches
+    // this is memory bandwidth, which no kernel can beat.
+    g.bench_function("floor_read/shared_inputs", |b| {
+        b.iter(|| {
+            let mut acc = 0u32;
+            for chunk in d.caps_data.chunks_exact(4) {
+                acc = acc.wrapping_add(chunk[0].to_bits());
+            }
+            for bk in &d.buckets {
+                acc = acc.wrapping_add(bk.slot_tri.iter().fold(0u32, |a, &t| a.wrapping_add(t)));
+                acc = acc.wrapping_add(
+                    bk.slot_parity
+                        .iter()
+                        .fold(0u32, |a, &p| a.wrapping_add(p as u32)),
+                );
+            }
+            std::hint::black_box(acc)
+        })
+    });
     g.bench_function("caps+sides/reference_shared", |b| {
         b.iter(|| pool.install(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
     });
