@@ -1450,3 +1450,38 @@ fn problems_outside_geometry_are_warnings() {
         soup.stats.warnings
     );
 }
+
+/// The recorded digest is SHA-256 of the file followed by the external
+/// buffer files it reads, whether it is computed beside the parse (inputs of
+/// 256 KiB and more with 2 threads) or not.
+#[test]
+fn digest_covers_the_file_then_its_buffers_with_any_thread_count() {
+    use sha2::{Digest, Sha256};
+    let dir = tempdir();
+    let (bin, rest) = triangle_bin();
+    let mut doc = bin.document(Some("tri.bin"), rest);
+    for pad in [0usize, 300 << 10] {
+        doc["asset"]["extras"] = json!({ "pad": "x".repeat(pad) });
+        let text = serde_json::to_vec(&doc).unwrap();
+        let p = dir.path().join("tri.gltf");
+        std::fs::write(&p, &text).unwrap();
+        std::fs::write(dir.path().join("tri.bin"), &bin.bytes).unwrap();
+        let mut all = text.clone();
+        all.extend_from_slice(&bin.bytes);
+        let expected: [u8; 32] = Sha256::digest(&all).into();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let soup = pool.install(|| load_gltf(&p, text.clone())).unwrap();
+            assert_eq!(
+                soup.input_bytes,
+                all.len() as u64,
+                "pad {pad}, {threads} threads"
+            );
+            assert_eq!(soup.input_sha256, expected, "pad {pad}, {threads} threads");
+            assert_eq!(soup.indices, vec![0, 1, 2]);
+        }
+    }
+}

@@ -14,7 +14,7 @@
 //! once, so a vertex deep in a node hierarchy with large translations does not
 //! pick up rounding error at every level.
 
-use super::{InputDigest, Part, Soup};
+use super::{Part, Soup};
 use crate::error::{Error, Result};
 use base64::Engine as _;
 use gltf::json;
@@ -55,11 +55,26 @@ const MAX_LISTED_PROBLEMS: usize = 3;
 /// accessor type, unsupported version or required geometry extension) is an
 /// [`Error::Input`]; NaN/Inf positions are passed through for later stages.
 pub fn load_gltf(path: &Path, data: Vec<u8>) -> Result<Soup> {
-    let mut digest = InputDigest::default();
-    digest.update(&data);
+    // The input's SHA-256 (the file, then the external buffers it reads, in
+    // buffer order) is computed beside the parse when there are threads to
+    // spare (see `hash_while`).
+    let (mut digest, loaded) = super::hash_while(&data, || load_parsed(path, &data));
+    let (mut soup, external) = loaded?;
+    for bytes in &external {
+        digest.update(bytes);
+    }
+    let (bytes, sha) = digest.finish();
+    soup.input_bytes = bytes;
+    soup.input_sha256 = sha;
+    Ok(soup)
+}
+
+/// Everything [`load_gltf`] does but the digest; also returns the bytes of
+/// the external buffer files it read, in the order it read them.
+fn load_parsed(path: &Path, data: &[u8]) -> Result<(Soup, Vec<Vec<u8>>)> {
     let mut warnings = Vec::new();
 
-    let container = split_container(path, &data, &mut warnings)?;
+    let container = split_container(path, data, &mut warnings)?;
     check_version(path, container.json)?;
     let root = parse_root(path, container.json)?;
     check_extensions(path, &root, &mut warnings)?;
@@ -77,9 +92,10 @@ pub fn load_gltf(path: &Path, data: Vec<u8>) -> Result<Soup> {
         }
     }
     let needed = GeometryRefs::collect(&root, |m| used_meshes.get(m) == Some(&true)).buffers;
-    let buffers = load_buffers(path, &root, container.bin, &needed, &mut digest)?;
+    let mut external = Vec::new();
+    let buffers = load_buffers(path, &root, container.bin, &needed, &mut external)?;
 
-    let ctx = Ctx {
+    let mut ctx = Ctx {
         path,
         root: &root,
         buffers,
@@ -90,10 +106,14 @@ pub fn load_gltf(path: &Path, data: Vec<u8>) -> Result<Soup> {
         warnings.push("no triangles found in the scene".to_string());
     }
     soup.stats.warnings = warnings;
-    let (bytes, sha) = digest.finish();
-    soup.input_bytes = bytes;
-    soup.input_sha256 = sha;
-    Ok(soup)
+    let files = external
+        .iter()
+        .filter_map(|&b| match ctx.buffers.get_mut(b).and_then(Option::take) {
+            Some(Cow::Owned(bytes)) => Some(bytes),
+            _ => None,
+        })
+        .collect();
+    Ok((soup, files))
 }
 
 // ---------------------------------------------------------------------------
@@ -883,12 +903,14 @@ fn collect_instances(
 
 /// Reads the buffers in `needed` (in index order, so the digest is
 /// deterministic) and checks each holds at least its declared byteLength.
+/// Pushes the index of every buffer read from a file to `external`, in the
+/// order read: those bytes go into the input's digest after the file's.
 fn load_buffers<'a>(
     path: &Path,
     root: &json::Root,
     glb_bin: Option<&'a [u8]>,
     needed: &BTreeSet<usize>,
-    digest: &mut InputDigest,
+    external: &mut Vec<usize>,
 ) -> Result<Vec<Option<Cow<'a, [u8]>>>> {
     let mut out: Vec<Option<Cow<'a, [u8]>>> = vec![None; root.buffers.len()];
     for &b in needed {
@@ -926,7 +948,7 @@ fn load_buffers<'a>(
                 let file = path.parent().unwrap_or(Path::new("")).join(&rel);
                 let bytes = std::fs::read(&file)
                     .map_err(|e| err(format!("cannot read {}: {e}", file.display())))?;
-                digest.update(&bytes);
+                external.push(b);
                 (Cow::Owned(bytes), format!("{rel:?}"))
             }
         };

@@ -104,18 +104,30 @@ const CONCURRENT_DIGEST_MIN: usize = 256 << 10;
 /// thread when the rayon pool the caller runs in has more than one, so
 /// `--threads 1` still means one core. The digest is the same either way.
 pub fn digest_while<T>(data: &[u8], work: impl FnOnce() -> T) -> ((u64, [u8; 32]), T) {
+    let (digest, result) = hash_while(data, work);
+    (digest.finish(), result)
+}
+
+/// [`digest_while`], with the digest left open so that more bytes (a glTF's
+/// external buffers, read by `work`) can follow `data` in it.
+pub fn hash_while<T>(data: &[u8], work: impl FnOnce() -> T) -> (InputDigest, T) {
+    let hash = || {
+        let mut digest = InputDigest::default();
+        digest.update(data);
+        digest
+    };
     if data.len() < CONCURRENT_DIGEST_MIN || rayon::current_num_threads() < 2 {
-        return (InputDigest::of(data), work());
+        return (hash(), work());
     }
     std::thread::scope(|scope| {
         let hasher = std::thread::Builder::new()
             .name("svpack-sha256".into())
-            .spawn_scoped(scope, || InputDigest::of(data));
+            .spawn_scoped(scope, hash);
         let result = work();
         // If the thread could not be started (or died), hash here instead.
         let digest = match hasher.map(|h| h.join()) {
             Ok(Ok(digest)) => digest,
-            _ => InputDigest::of(data),
+            _ => hash(),
         };
         (digest, result)
     })
