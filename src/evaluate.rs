@@ -301,37 +301,17 @@ pub fn side_multiplicities_shared(
     light: Light,
     out: &mut [i8],
 ) {
-    let stride = (2 + k) * 4;
-    assert_eq!(data.len(), out.len() * stride, "bucket size mismatch");
-    assert_eq!(slot_tri.len(), out.len() * k, "slot table size mismatch");
-    assert_eq!(slot_parity.len(), out.len() * k, "slot table size mismatch");
-    out.par_chunks_mut(CHUNK)
-        .zip(data.par_chunks(CHUNK * stride))
-        .zip(
-            slot_tri
-                .par_chunks(CHUNK * k)
-                .zip(slot_parity.par_chunks(CHUNK * k)),
-        )
-        .for_each(|((o, d), (tri, par))| {
-            if crate::evaluate_simd::try_sides_from_caps(k, tri, par, caps, o) {
-                return;
-            }
-            for (((m, r), t), p) in o
-                .iter_mut()
-                .zip(d.chunks_exact(stride))
-                .zip(tri.chunks_exact(k))
-                .zip(par.chunks_exact(k))
-            {
-                let mut sum = 0i32;
-                for j in 0..k {
-                    sum += match caps.get(t[j] as usize) {
-                        Some(&c) => p[j] as i32 * c as i32,
-                        None => strategy.side_sign(xyz(r, 0), xyz(r, 4), xyz(r, 8 + 4 * j), light),
-                    };
-                }
-                *m = sum as i8;
-            }
-        });
+    shared_loop(
+        true,
+        strategy,
+        k,
+        data,
+        slot_tri,
+        slot_parity,
+        caps,
+        light,
+        out,
+    );
 }
 
 /// [`side_multiplicities_shared`] as it was before the vectorised gather:
@@ -347,9 +327,38 @@ pub fn side_multiplicities_shared_scalar(
     light: Light,
     out: &mut [i8],
 ) {
+    shared_loop(
+        false,
+        strategy,
+        k,
+        data,
+        slot_tri,
+        slot_parity,
+        caps,
+        light,
+        out,
+    );
+}
+
+/// The two shared evaluators: per chunk, the vectorised gather when `gather`
+/// is set and the chunk's slots all name a triangle, else one checked
+/// `caps.get` per slot with `strategy` for unknown slots.
+#[allow(clippy::too_many_arguments)]
+fn shared_loop(
+    gather: bool,
+    strategy: Strategy,
+    k: usize,
+    data: &[f32],
+    slot_tri: &[u32],
+    slot_parity: &[i8],
+    caps: &[i8],
+    light: Light,
+    out: &mut [i8],
+) {
     let stride = (2 + k) * 4;
     assert_eq!(data.len(), out.len() * stride, "bucket size mismatch");
     assert_eq!(slot_tri.len(), out.len() * k, "slot table size mismatch");
+    assert_eq!(slot_parity.len(), out.len() * k, "slot table size mismatch");
     out.par_chunks_mut(CHUNK)
         .zip(data.par_chunks(CHUNK * stride))
         .zip(
@@ -358,6 +367,9 @@ pub fn side_multiplicities_shared_scalar(
                 .zip(slot_parity.par_chunks(CHUNK * k)),
         )
         .for_each(|((o, d), (tri, par))| {
+            if gather && crate::evaluate_simd::try_sides_from_caps(k, tri, par, caps, o) {
+                return;
+            }
             for (((m, r), t), p) in o
                 .iter_mut()
                 .zip(d.chunks_exact(stride))
@@ -467,14 +479,7 @@ mod tests {
         // Near-parallel lights: Kim's three expressions can disagree here, but
         // Pečiva, f64 and exact evaluate one canonical expression per triangle.
         let mut rnd = crate::multiplicity::test_rng(777);
-        let perms = [
-            [0, 1, 2],
-            [1, 2, 0],
-            [2, 0, 1],
-            [1, 0, 2],
-            [0, 2, 1],
-            [2, 1, 0],
-        ];
+        let perms = crate::multiplicity::PERMS;
         for _ in 0..5000 {
             let t = [
                 [rnd(), rnd(), rnd() * 1e-6],

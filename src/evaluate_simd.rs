@@ -468,17 +468,9 @@ mod tests {
     /// Caps records (12 floats each, `.w` = 1) of triangles in every corner
     /// order, so both parities of each sorting permutation occur.
     fn caps_records(tris: &[[[f32; 3]; 3]]) -> Vec<f32> {
-        const PERMS: [[usize; 3]; 6] = [
-            [0, 1, 2],
-            [1, 2, 0],
-            [2, 0, 1],
-            [1, 0, 2],
-            [0, 2, 1],
-            [2, 1, 0],
-        ];
         let mut d = Vec::new();
         for t in tris {
-            for p in PERMS {
+            for p in crate::multiplicity::PERMS {
                 for i in p {
                     d.extend_from_slice(&t[i]);
                     d.push(1.0);

@@ -175,6 +175,18 @@ pub fn cap_corner(v: u32, c: i32) -> (u32, bool) {
     (corner, at_infinity)
 }
 
+/// The six orders of three corners (even permutations first), for the unit
+/// tests here, in `evaluate` and in `evaluate_simd`.
+#[cfg(test)]
+pub(crate) const PERMS: [[usize; 3]; 6] = [
+    [0, 1, 2],
+    [1, 2, 0],
+    [2, 0, 1],
+    [1, 0, 2],
+    [0, 2, 1],
+    [2, 1, 0],
+];
+
 /// Xorshift generator of f32 in [-1, 1) for the unit tests here and in
 /// `evaluate` (fixed seeds, so failures reproduce).
 #[cfg(test)]
@@ -190,15 +202,6 @@ pub(crate) fn test_rng(mut seed: u64) -> impl FnMut() -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    const PERMS: [[usize; 3]; 6] = [
-        [0, 1, 2],
-        [1, 2, 0],
-        [2, 0, 1],
-        [1, 0, 2],
-        [0, 2, 1],
-        [2, 1, 0],
-    ];
 
     #[test]
     fn orientation_matches_geometry() {
