@@ -349,7 +349,7 @@ fn write_records<W: Write>(out: &mut W, floats: &[f32], enc: Encoding) -> std::i
 /// The floats are cut into fixed chunks whose encoded sizes are multiples of
 /// [`ALIGN`], so [`write_records`] of each chunk pads nothing except after the
 /// last one, and the chunks' byte streams concatenate to exactly the
-/// section's. Each chunk is hashed on its own and the CRCs are combined in
+/// section's (an empty section writes nothing, not even padding). Each chunk is hashed on its own and the CRCs are combined in
 /// chunk order (`crc32fast::Hasher::combine`), so the result is the CRC of the
 /// whole stream whatever the thread count.
 fn crc_records(hasher: &mut crc32fast::Hasher, floats: &[f32], enc: Encoding) {
@@ -364,10 +364,6 @@ fn crc_records(hasher: &mut crc32fast::Hasher, floats: &[f32], enc: Encoding) {
             h
         })
         .collect();
-    if parts.is_empty() {
-        // An empty section still writes (zero bytes of) padding.
-        crc_records_serial(hasher, floats, enc);
-    }
     for part in &parts {
         hasher.combine(part);
     }
