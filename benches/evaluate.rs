@@ -85,6 +85,16 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             b.iter(|| pool.install(|| caps(strategy, &d.caps_data, light, &mut o)))
         });
     }
+    // The caps from sorted corner ids (what `verify` uses for the reference
+    // when the file's position table allows it), per triangle: reads against
+    // caps/reference above.
+    if let Some(ix) = &d.indexed {
+        g.throughput(Throughput::Elements(ix.len() as u64));
+        g.bench_function("caps/reference_indexed", |b| {
+            let mut o = vec![0i8; ix.len()];
+            b.iter(|| pool.install(|| ix.cap_signs(light, &mut o)))
+        });
+    }
     // The evaluator `verify` uses: each triangle's sign once (caps), then
     // every side record as a signed sum of its triangles' signs; per light,
     // caps + sides. Reported per side record (edge instance), so it reads
@@ -113,8 +123,60 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             std::hint::black_box(acc)
         })
     });
+    // Floor of the shared evaluation with caps from ids: reading the caps'
+    // corner ids, the position table and the side slots' triangle ids and
+    // parities, nothing computed.
+    g.bench_function("floor_read/indexed_inputs", |b| {
+        b.iter(|| {
+            let mut acc = 0u32;
+            for c in &d.caps {
+                acc = acc.wrapping_add(c[0] ^ c[1] ^ c[2]);
+            }
+            for p in &d.positions {
+                acc = acc.wrapping_add(p[0].to_bits());
+            }
+            for bk in &d.buckets {
+                acc = acc.wrapping_add(bk.slot_tri.iter().fold(0u32, |a, &t| a.wrapping_add(t)));
+                acc = acc.wrapping_add(
+                    bk.slot_parity
+                        .iter()
+                        .fold(0u32, |a, &p| a.wrapping_add(p as u32)),
+                );
+            }
+            std::hint::black_box(acc)
+        })
+    });
     g.bench_function("caps+sides/reference_shared", |b| {
         b.iter(|| pool.install(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
+    });
+    // The same with the caps from the records (the shared evaluator before
+    // the ids), the peer of the line above.
+    g.bench_function("caps+sides/reference_shared_record_caps", |b| {
+        b.iter(|| {
+            pool.install(|| {
+                let mut caps = vec![0i8; d.caps.len()];
+                cap_signs_with(Strategy::Reference, &d.caps_data, light, &mut caps);
+                let sides: Vec<Vec<i8>> = d
+                    .buckets
+                    .iter()
+                    .map(|bk| {
+                        let mut m = vec![0i8; bk.records()];
+                        side_multiplicities_shared(
+                            Strategy::Reference,
+                            bk.k,
+                            &bk.data,
+                            &bk.slot_tri,
+                            &bk.slot_parity,
+                            &caps,
+                            light,
+                            &mut m,
+                        );
+                        m
+                    })
+                    .collect();
+                (caps, sides)
+            })
+        })
     });
     g.bench_function("caps+sides/reference_shared_scalar", |b| {
         b.iter(|| {

@@ -53,12 +53,20 @@ pub fn tri_sign_nb(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3], l: Light) -> i32 {
     let s2 = lex_less_nb(b, a);
     let (r0, r1) = (pick(s2, b, a), pick(s2, a, b));
     let r2 = c;
-    let odd = s0 ^ s1 ^ s2;
-    // The point light exactly on a corner: 0 (spec §2). Which corner does not
-    // matter, so the unsorted corners are tested (no wait for the sort).
+    sorted_sign_nb(r0, r1, r2, s0 ^ s1 ^ s2, l)
+}
+
+/// The part of [`tri_sign_nb`] after the corner sort: corners already in the
+/// network's order (`r0, r1, r2`) and the parity of the sorting permutation
+/// (`odd`). The light-on-corner test, the contract's expression, its sign,
+/// the parity flip, all without branches (format-spec/multiplicity.md §2).
+/// [`crate::evaluate_indexed`] calls it with corners sorted once per file.
+#[inline(always)]
+pub(crate) fn sorted_sign_nb(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], odd: bool, l: Light) -> i32 {
+    // The point light exactly on a corner: 0 (spec §2), whichever corner.
     let lp = [l[0], l[1], l[2]];
     let eq = |p: [f32; 3]| (p[0] == lp[0]) & (p[1] == lp[1]) & (p[2] == lp[2]);
-    let on_corner = (l[3] == 1.0) & (eq(p0) | eq(p1) | eq(p2));
+    let on_corner = (l[3] == 1.0) & (eq(r0) | eq(r1) | eq(r2));
     // The contract's expression, written once (multiplicity::ref_expr).
     let s = crate::multiplicity::ref_expr(r0, r1, r2, l);
     let sign = (s > 0.0) as i32 - (s < 0.0) as i32;
@@ -75,7 +83,7 @@ fn xyz(r: &[f32], at: usize) -> [f32; 3] {
 pub const LANES: usize = 8;
 
 /// One corner of [`LANES`] triangles, structure of arrays: `[x, y, z][lane]`.
-type Corner = [[f32; LANES]; 3];
+pub(crate) type Corner = [[f32; LANES]; 3];
 
 /// Reads the corner at float offset `off` of [`LANES`] consecutive records
 /// of `stride` floats (each corner a vec4 `x, y, z, w`) into lanes.
@@ -106,22 +114,33 @@ fn load_corner<const AVX2: bool>(r: &[f32], stride: usize, off: usize, dst: &mut
 #[target_feature(enable = "avx2")]
 #[inline]
 fn load_corner_avx2(r: &[f32], stride: usize, off: usize, dst: &mut Corner) {
-    use std::arch::x86_64::*;
     let r = &r[..LANES * stride];
+    let rows: [&[f32; 4]; LANES] =
+        std::array::from_fn(|i| r[stride * i + off..][..4].try_into().unwrap());
+    load_rows_avx2(rows, dst)
+}
+
+/// `dst[a][i] = rows[i][a]` for `a` in x, y, z: [`LANES`] vec4s (anywhere
+/// in memory) transposed into lanes, with AVX2: each vec4 loaded whole and
+/// 4×4 blocks transposed with unpack shuffles (7 shuffles per 8 corners).
+/// Loads and shuffles do not touch values, so the lanes hold the same bits
+/// as an element-by-element copy.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn load_rows_avx2(rows: [&[f32; 4]; LANES], dst: &mut Corner) {
+    use std::arch::x86_64::*;
     let mut v = [_mm256_setzero_ps(); 4];
     for (i, v) in v.iter_mut().enumerate() {
-        let lo = &r[stride * i + off..][..4];
-        let hi = &r[stride * (i + 4) + off..][..4];
-        // SAFETY: `lo` and `hi` are 4 floats each (the slicing checked it);
-        // unaligned loads.
+        // SAFETY: each row is 4 floats; unaligned loads.
         *v = unsafe {
             _mm256_insertf128_ps::<1>(
-                _mm256_castps128_ps256(_mm_loadu_ps(lo.as_ptr())),
-                _mm_loadu_ps(hi.as_ptr()),
+                _mm256_castps128_ps256(_mm_loadu_ps(rows[i].as_ptr())),
+                _mm_loadu_ps(rows[i + 4].as_ptr()),
             )
         };
     }
-    // v[i] = (x, y, z, w) of record i | of record i + 4. Per 128-bit half:
+    // v[i] = (x, y, z, w) of row i | of row i + 4. Per 128-bit half:
     let t0 = _mm256_unpacklo_ps(v[0], v[1]); // x0 x1 y0 y1
     let t1 = _mm256_unpackhi_ps(v[0], v[1]); // z0 z1 w0 w1
     let t2 = _mm256_unpacklo_ps(v[2], v[3]); // x2 x3 y2 y3
@@ -187,7 +206,7 @@ fn caps_avx2(data: &[f32], l: Light, out: &mut [i8]) {
 
 /// True when the AVX2 versions may run.
 #[inline]
-fn have_avx2() -> bool {
+pub(crate) fn have_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")

@@ -6,6 +6,7 @@ pub mod alloc;
 pub mod build;
 pub mod error;
 pub mod evaluate;
+pub mod evaluate_indexed;
 pub mod evaluate_simd;
 pub mod exact;
 pub mod format;

@@ -135,82 +135,93 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
         });
     drop(block_at);
 
-    // Pass 3: sort each partition by (smaller, larger), stably; count edges.
-    let mut part_recs: Vec<&mut [[u32; 4]]> = Vec::with_capacity(parts);
-    let mut rest: &mut [[u32; 4]] = &mut recs;
-    for p in 0..parts {
-        let (mine, tail) = rest.split_at_mut(part_start[p + 1] - part_start[p]);
-        part_recs.push(mine);
-        rest = tail;
+    // Pass 3: sort each partition by (smaller, larger), stably, and write
+    // its opposite vertices and triangles straight into their final place
+    // (the partition's records keep their range: `opp` has one entry per
+    // half-edge, in the same order). Only the edges themselves wait for the
+    // prefix sum of the partitions' edge counts; each partition keeps them
+    // in a small list meanwhile.
+    let mut opp = vec![0u32; half_edges];
+    let mut opp_tri = vec![0u32; half_edges];
+    let mut jobs = Vec::with_capacity(parts);
+    {
+        let mut rest: &[[u32; 4]] = &recs;
+        let (mut ro, mut rt) = (&mut opp[..], &mut opp_tri[..]);
+        for p in 0..parts {
+            let m = part_start[p + 1] - part_start[p];
+            let (mine, tail) = rest.split_at(m);
+            let (o1, o2) = ro.split_at_mut(m);
+            let (t1, t2) = rt.split_at_mut(m);
+            jobs.push((mine, o1, t1));
+            (rest, ro, rt) = (tail, o2, t2);
+        }
     }
-    let edge_counts: Vec<usize> = part_recs
-        .par_iter_mut()
+    let part_edges: Vec<Vec<[u32; 3]>> = jobs
+        .into_par_iter()
         .enumerate()
         .map_init(
             || (Vec::new(), Vec::new()),
-            |(start, scratch): &mut (Vec<u32>, Vec<[u32; 4]>), (p, recs)| {
-                sort_partition(recs, (p * PART) as u32, start, scratch)
+            |(start, scratch): &mut (Vec<u32>, Vec<[u32; 4]>), (p, (recs, oo, ot))| {
+                sort_partition(recs, (p * PART) as u32, start, scratch);
+                let sorted = &scratch[..];
+                // About half the records of a closed mesh close an edge.
+                let mut out = Vec::with_capacity(sorted.len() / 2 + 16);
+                let base = part_start[p] as u32;
+                for (i, r) in sorted.iter().enumerate() {
+                    oo[i] = r[2];
+                    ot[i] = r[3];
+                    // The last record of each (smaller, larger) run closes
+                    // an edge; its range ends here (a global position).
+                    let last = sorted
+                        .get(i + 1)
+                        .is_none_or(|n| n[0] != r[0] || n[1] != r[1]);
+                    if last {
+                        out.push([r[0], r[1], base + i as u32 + 1]);
+                    }
+                }
+                out
             },
         )
         .collect();
+    drop(recs);
 
-    // Pass 4: write each partition's edges into its own output ranges.
-    let edge_total: usize = edge_counts.iter().sum();
+    // Pass 4: the partitions' edges, concatenated in partition order.
+    let edge_total: usize = part_edges.iter().map(Vec::len).sum();
     let mut edges = Edges {
         a: vec![0; edge_total],
         b: vec![0; edge_total],
         opp_start: vec![0; edge_total + 1],
-        opp: vec![0; half_edges],
-        opp_tri: vec![0; half_edges],
+        opp,
+        opp_tri,
     };
     let mut outs = Vec::with_capacity(parts);
     {
         let (mut ra, mut rb) = (&mut edges.a[..], &mut edges.b[..]);
         let mut rs = &mut edges.opp_start[1..];
-        let (mut ro, mut rt) = (&mut edges.opp[..], &mut edges.opp_tri[..]);
-        for (p, &n) in edge_counts.iter().enumerate() {
-            let m = part_start[p + 1] - part_start[p];
-            let (a1, a2) = ra.split_at_mut(n);
-            let (b1, b2) = rb.split_at_mut(n);
-            let (s1, s2) = rs.split_at_mut(n);
-            let (o1, o2) = ro.split_at_mut(m);
-            let (t1, t2) = rt.split_at_mut(m);
-            outs.push((a1, b1, s1, o1, t1));
-            (ra, rb, rs, ro, rt) = (a2, b2, s2, o2, t2);
+        for list in &part_edges {
+            let (a1, a2) = ra.split_at_mut(list.len());
+            let (b1, b2) = rb.split_at_mut(list.len());
+            let (s1, s2) = rs.split_at_mut(list.len());
+            outs.push((a1, b1, s1));
+            (ra, rb, rs) = (a2, b2, s2);
         }
     }
     outs.into_par_iter()
-        .zip(part_recs.into_par_iter())
-        .enumerate()
-        .for_each(|(p, ((oa, ob, os, oo, ot), recs))| {
-            let base = part_start[p] as u32;
-            let mut e = 0;
-            for (i, r) in recs.iter().enumerate() {
-                oo[i] = r[2];
-                ot[i] = r[3];
-                // The last record of each (smaller, larger) run closes an edge.
-                let last = recs.get(i + 1).is_none_or(|n| n[0] != r[0] || n[1] != r[1]);
-                if last {
-                    oa[e] = r[0];
-                    ob[e] = r[1];
-                    // Opposite ranges are global positions in `opp`.
-                    os[e] = base + i as u32 + 1;
-                    e += 1;
-                }
+        .zip(part_edges.par_iter())
+        .for_each(|((oa, ob, os), list)| {
+            for (i, e) in list.iter().enumerate() {
+                oa[i] = e[0];
+                ob[i] = e[1];
+                os[i] = e[2];
             }
         });
     edges
 }
 
 /// Sorts one partition's records (smaller endpoints `base .. base + PART`)
-/// by (smaller, larger) endpoint, stably, and returns its edge count.
-/// `start` and `scratch` are reusable buffers.
-fn sort_partition(
-    recs: &mut [[u32; 4]],
-    base: u32,
-    start: &mut Vec<u32>,
-    scratch: &mut Vec<[u32; 4]>,
-) -> usize {
+/// by (smaller, larger) endpoint, stably, into `scratch` (resized to
+/// `recs.len()`). `start` and `scratch` are reusable buffers.
+fn sort_partition(recs: &[[u32; 4]], base: u32, start: &mut Vec<u32>, scratch: &mut Vec<[u32; 4]>) {
     // Counting sort by smaller endpoint into `scratch` (stable).
     start.clear();
     start.resize(PART + 1, 0);
@@ -238,7 +249,6 @@ fn sort_partition(
     // library's unstable sort on (larger endpoint, triangle), which gives the
     // same order because a triangle has at most one half-edge per vertex pair,
     // so the keys are distinct.
-    let mut edges = 0;
     for v in 0..PART {
         let run = &mut scratch[start[v] as usize..start[v + 1] as usize];
         if run.len() <= 8 {
@@ -252,14 +262,7 @@ fn sort_partition(
         } else {
             run.sort_unstable_by_key(|r| (u64::from(r[1]) << 32) | u64::from(r[3]));
         }
-        edges += run.len().min(1)
-            + run
-                .windows(2)
-                .map(|w| usize::from(w[0][1] != w[1][1]))
-                .sum::<usize>();
     }
-    recs.copy_from_slice(scratch);
-    edges
 }
 
 /// log2 of the vertices per partition: 2048 smaller endpoints carry about

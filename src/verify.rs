@@ -15,6 +15,7 @@
 //! checks work on integers.
 
 use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
+use crate::evaluate_indexed::IndexedCaps;
 use crate::format::SvpkFile;
 use crate::multiplicity::{Light, cap_corner, lex_less, side_corner, to_infinity};
 use rustc_hash::FxHashMap;
@@ -35,6 +36,11 @@ pub struct Decoded {
     pub caps: Vec<[u32; 3]>,
     /// Side buckets.
     pub buckets: Vec<DecodedBucket>,
+    /// The caps as sorted corner ids into `positions`, for the per-light
+    /// cap signs of [`evaluate`]; `None` when `positions` is not strictly
+    /// increasing (a NaN or a ±0.0 pair), see
+    /// [`crate::evaluate_indexed`].
+    pub indexed: Option<IndexedCaps>,
 }
 
 /// One sides bucket, decoded.
@@ -162,7 +168,9 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
             }
         })
         .collect();
+    let indexed = IndexedCaps::new(&positions, &caps);
     Decoded {
+        indexed,
         space: crate::quantize::RecordSpace {
             offset: m.position_offset,
             scale: m.position_scale,
@@ -325,15 +333,17 @@ pub struct Evaluation {
 /// Slots without a matching triangle (a damaged file) are evaluated directly.
 ///
 /// For [`Strategy::Reference`] both halves are vectorised: the caps through
-/// [`crate::evaluate_simd::cap_signs`] (branch-free corner sort, 8 triangles
-/// per AVX2 instruction) and the sides through the bounds-check-free gather
-/// of [`crate::evaluate_simd::try_sides_from_caps`]; results are bit for bit
-/// those of the scalar loops (`crate::evaluate::*_scalar`).
+/// [`IndexedCaps::cap_signs`] (corners sorted once per file, 8 triangles per
+/// AVX2 instruction; [`crate::evaluate_simd::cap_signs`] on the records when
+/// the file's table declines it) and the sides through the
+/// bounds-check-free gather of [`crate::evaluate_simd::try_sides_from_caps`];
+/// results are bit for bit those of the scalar loops
+/// (`crate::evaluate::*_scalar`).
 pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
     if strategy == Strategy::Kim {
         return evaluate_per_record(d, light, strategy);
     }
-    evaluate_sides(d, light, strategy, |b, caps, m| {
+    evaluate_sides(d, light, strategy, true, |b, caps, m| {
         crate::evaluate::side_multiplicities_shared(
             strategy,
             b.k,
@@ -349,20 +359,26 @@ pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
 
 /// [`evaluate`] record by record, exactly as the shaders do it.
 pub fn evaluate_per_record(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
-    evaluate_sides(d, light, strategy, |b, _, m| {
+    evaluate_sides(d, light, strategy, false, |b, _, m| {
         side_multiplicities_with(strategy, b.k, &b.data, light, m)
     })
 }
 
-/// Cap signs, then every bucket's multiplicities through `sides(bucket, caps, out)`.
+/// Cap signs (from the ids when `by_ids` and the strategy is the
+/// reference, else from the records), then every bucket's multiplicities
+/// through `sides(bucket, caps, out)`.
 fn evaluate_sides(
     d: &Decoded,
     light: Light,
     strategy: Strategy,
+    by_ids: bool,
     sides: impl Fn(&DecodedBucket, &[i8], &mut [i8]),
 ) -> Evaluation {
     let mut caps = vec![0i8; d.caps.len()];
-    cap_signs_with(strategy, &d.caps_data, light, &mut caps);
+    match &d.indexed {
+        Some(ix) if by_ids && strategy == Strategy::Reference => ix.cap_signs(light, &mut caps),
+        _ => cap_signs_with(strategy, &d.caps_data, light, &mut caps),
+    }
     let sides = d
         .buckets
         .iter()

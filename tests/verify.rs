@@ -252,9 +252,10 @@ fn samples_on_volume_faces_are_reported_not_compared() {
     assert_eq!((r.on_faces, r.samples, r.mismatches), (0, 3, 0), "{r:?}");
 }
 
-/// The evaluator's shared path (each triangle once, sides as signed sums of
-/// cap signs) gives exactly what evaluating every record as the shader does
-/// gives, for every consistent strategy, on the hard cases and a real model.
+/// The evaluator's shared path (each triangle once, from sorted corner ids;
+/// sides as signed sums of cap signs) gives exactly what evaluating every
+/// record as the shader does gives, for every consistent strategy, on the
+/// hard cases and a real model.
 #[test]
 fn shared_evaluation_equals_per_record_evaluation() {
     use svpack::evaluate::Strategy;
@@ -278,6 +279,9 @@ fn shared_evaluation_equals_per_record_evaluation() {
                 .iter()
                 .all(|b| b.slot_tri.iter().all(|&t| t != u32::MAX))
         );
+        // A built file's position table is strictly increasing, so the
+        // shared path's caps run on sorted corner ids (evaluate_indexed).
+        assert!(d.indexed.is_some(), "{}", input.display());
         for light in choose_lights(&d, 24, 5) {
             for s in Strategy::ALL {
                 let (a, b) = (evaluate(&d, light, s), evaluate_per_record(&d, light, s));

@@ -1,0 +1,323 @@
+//! Cap signs from corner ids: [`Strategy::Reference`](crate::evaluate::Strategy)
+//! orientations of every caps triangle, evaluated over a table of the
+//! file's distinct positions with each triangle's corners sorted once per
+//! file instead of once per light.
+//!
+//! Why: per light, the record kernel ([`crate::evaluate_simd::cap_signs`])
+//! reads 48 bytes per triangle and runs the three-comparator network on
+//! float corners (nine lexicographic comparisons and as many selects per
+//! triangle). When the position table is strictly increasing in the
+//! contract's lexicographic order, comparing two ids *is* comparing the two
+//! positions (`a < b` ⇔ `lex_less(P[a], P[b])`, equal ids compare equal
+//! both ways, NaN included), so the network run once on ids takes exactly
+//! the decisions it would take on the floats: the same sorted corners, the
+//! same parity. What is left per light is the contract's expression on
+//! three gathered corners ([`crate::evaluate_simd`]'s `sorted_sign_nb`,
+//! itself [`crate::multiplicity::ref_expr`]), reading 12 bytes of ids and
+//! one parity byte per triangle. The results are bit for bit those of the
+//! record kernel; the tests compare the two.
+//!
+//! A table that is not strictly increasing (a NaN, or `+0.0` and `−0.0` at
+//! otherwise equal positions: distinct bit patterns that compare equal)
+//! breaks the equivalence, and [`IndexedCaps::new`] declines it; callers
+//! then use the record kernel.
+
+use crate::evaluate_simd::{Corner, LANES, sorted_sign_nb};
+use crate::multiplicity::{Light, lex_less};
+use rayon::prelude::*;
+
+/// Triangles per rayon task: large enough that scheduling costs nothing.
+const CHUNK: usize = 4096;
+
+/// Caps triangles as sorted corner ids into a position table. Built once per
+/// file by [`IndexedCaps::new`]; [`IndexedCaps::cap_signs`] per light.
+#[derive(Debug, Clone)]
+pub struct IndexedCaps {
+    /// The positions the triangles use as `x, y, z, 0` (one 16-byte load
+    /// per corner), in order of first use.
+    points: Vec<[f32; 4]>,
+    /// Per triangle, its corner ids into `points` in the order the
+    /// contract's three-comparator network sorts the corners to.
+    sorted: Vec<[u32; 3]>,
+    /// Per triangle, whether that sort was an odd permutation.
+    odd: Vec<bool>,
+}
+
+/// The three-comparator network of the contract (format-spec §3) on ids:
+/// the same comparator sequence, swapping only when the later id is
+/// strictly smaller, and the parity of the swaps.
+fn sort_ids(mut v: [u32; 3]) -> ([u32; 3], bool) {
+    let mut odd = false;
+    for (i, j) in [(0, 1), (1, 2), (0, 1)] {
+        if v[j] < v[i] {
+            v.swap(i, j);
+            odd = !odd;
+        }
+    }
+    (v, odd)
+}
+
+impl IndexedCaps {
+    /// Sorts the corners of every triangle of `caps` (ids into `positions`)
+    /// once. `None` when `positions` is not strictly increasing under
+    /// [`lex_less`] or an id is out of range: then id order would not be
+    /// the contract's order, and the caller must evaluate the records.
+    pub fn new(positions: &[[f32; 3]], caps: &[[u32; 3]]) -> Option<Self> {
+        if !positions.windows(2).all(|w| lex_less(w[0], w[1])) {
+            return None;
+        }
+        let n = positions.len();
+        if caps.iter().flatten().any(|&i| i as usize >= n) {
+            return None;
+        }
+        let (mut sorted, odd): (Vec<[u32; 3]>, Vec<bool>) =
+            caps.iter().map(|&c| sort_ids(c)).unzip();
+        // Renumber the table in order of first use by the triangles (the
+        // corners' sorted order is kept; only the names change). The
+        // lexicographic numbering scatters a triangle's corners over the
+        // whole table, so every corner load missed the cache: on the 871k
+        // triangle dragon this kernel was 2.3× slower than the record kernel
+        // before, and is faster after (benches/evaluate.rs,
+        // `caps/reference_indexed`).
+        let mut rename = vec![u32::MAX; n];
+        let mut points = Vec::with_capacity(n);
+        for id in sorted.iter_mut().flatten() {
+            let r = &mut rename[*id as usize];
+            if *r == u32::MAX {
+                *r = points.len() as u32;
+                let p = positions[*id as usize];
+                points.push([p[0], p[1], p[2], 0.0]);
+            }
+            *id = *r;
+        }
+        Some(IndexedCaps {
+            points,
+            sorted,
+            odd,
+        })
+    }
+
+    /// Number of triangles.
+    pub fn len(&self) -> usize {
+        self.sorted.len()
+    }
+
+    /// True when there are no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.sorted.is_empty()
+    }
+
+    /// Bytes read per light: ids and parities per triangle, and the table.
+    pub fn bytes_read(&self) -> usize {
+        self.sorted.len() * 13 + self.points.len() * 16
+    }
+
+    /// Reference orientation of every triangle for light `l`: `out[t]` is
+    /// `tri_sign` of triangle `t`'s corners in their stored order, bit for
+    /// bit what [`crate::evaluate_simd::cap_signs`] computes from the
+    /// records. `out.len()` must equal [`IndexedCaps::len`].
+    pub fn cap_signs(&self, l: Light, out: &mut [i8]) {
+        assert_eq!(out.len(), self.sorted.len(), "caps size mismatch");
+        out.par_chunks_mut(CHUNK)
+            .zip(self.sorted.par_chunks(CHUNK))
+            .zip(self.odd.par_chunks(CHUNK))
+            .for_each(|((o, t), odd)| self.signs(t, odd, l, o));
+    }
+
+    /// One chunk, through the AVX2 version when the CPU has it.
+    fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, out: &mut [i8]) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::evaluate_simd::have_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { signs_avx2(&self.points, sorted, odd, l, out) };
+        }
+        signs_impl::<false>(&self.points, sorted, odd, l, out)
+    }
+}
+
+/// Corner `c` of the [`LANES`] triangles `t` into lanes.
+#[inline(always)]
+fn gather<const AVX2: bool>(points: &[[f32; 4]], t: &[[u32; 3]], c: usize, dst: &mut Corner) {
+    let rows: [&[f32; 4]; LANES] = std::array::from_fn(|i| &points[t[i][c] as usize]);
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is true only in code compiled with the `avx2`
+        // feature, which runs only after the CPU was found to have it.
+        unsafe { crate::evaluate_simd::load_rows_avx2(rows, dst) };
+        return;
+    }
+    for (i, r) in rows.iter().enumerate() {
+        for (a, lane) in dst.iter_mut().enumerate() {
+            lane[i] = r[a];
+        }
+    }
+}
+
+/// Blocks of [`LANES`] triangles (three gathered corners, then one lane per
+/// triangle through `sorted_sign_nb`, which LLVM vectorises), then the tail
+/// triangle by triangle through the same function.
+#[inline(always)]
+fn signs_impl<const AVX2: bool>(
+    points: &[[f32; 4]],
+    sorted: &[[u32; 3]],
+    odd: &[bool],
+    l: Light,
+    out: &mut [i8],
+) {
+    let xyz = |i: u32| {
+        let p = points[i as usize];
+        [p[0], p[1], p[2]]
+    };
+    let mut blocks = out.chunks_exact_mut(LANES);
+    let mut tris = sorted.chunks_exact(LANES);
+    let mut odds = odd.chunks_exact(LANES);
+    for ((o, t), odd) in (&mut blocks).zip(&mut tris).zip(&mut odds) {
+        let mut p = [[[0f32; LANES]; 3]; 3];
+        for (c, p) in p.iter_mut().enumerate() {
+            gather::<AVX2>(points, t, c, p);
+        }
+        let mut s = [0i32; LANES];
+        for (i, s) in s.iter_mut().enumerate() {
+            let c = |p: &Corner| [p[0][i], p[1][i], p[2][i]];
+            *s = sorted_sign_nb(c(&p[0]), c(&p[1]), c(&p[2]), odd[i], l);
+        }
+        for (o, s) in o.iter_mut().zip(s) {
+            *o = s as i8;
+        }
+    }
+    let tail = blocks.into_remainder();
+    for ((o, t), &odd) in tail.iter_mut().zip(tris.remainder()).zip(odds.remainder()) {
+        *o = sorted_sign_nb(xyz(t[0]), xyz(t[1]), xyz(t[2]), odd, l) as i8;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn signs_avx2(points: &[[f32; 4]], sorted: &[[u32; 3]], odd: &[bool], l: Light, out: &mut [i8]) {
+    signs_impl::<true>(points, sorted, odd, l, out)
+}
+
+#[cfg(test)]
+mod tests {
+    //! Against the record kernel, bit for bit, on tables and triangles
+    //! chosen to hit every tie of the lexicographic order (shared x or y,
+    //! repeated corners), every orientation of the stored corners, lights on
+    //! corners and directional lights; and the tables the equivalence does
+    //! not hold for must be declined.
+    use super::*;
+    use crate::multiplicity::PERMS;
+
+    /// Xorshift64, fixed seeds: failures reproduce.
+    fn test_rng(mut seed: u64) -> impl FnMut() -> u64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        }
+    }
+
+    /// A sorted, deduplicated table with many equal x and y coordinates.
+    fn table(n: usize, seed: u64) -> Vec<[f32; 3]> {
+        let mut next = test_rng(seed);
+        let mut coord = move || {
+            const LATTICE: [f32; 7] = [-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 1e-7];
+            let r = next();
+            if r.is_multiple_of(3) {
+                (r >> 8) as f32 / (1u64 << 56) as f32 * 4.0 - 2.0
+            } else {
+                LATTICE[(r >> 8) as usize % LATTICE.len()]
+            }
+        };
+        let mut p: Vec<[f32; 3]> = (0..n).map(|_| [coord(), coord(), coord()]).collect();
+        p.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        p.dedup();
+        p
+    }
+
+    /// Record-kernel signs of `caps` over `positions`, the oracle.
+    fn by_records(positions: &[[f32; 3]], caps: &[[u32; 3]], l: Light) -> Vec<i8> {
+        let data: Vec<f32> = caps
+            .iter()
+            .flat_map(|c| {
+                c.iter()
+                    .flat_map(|&i| positions[i as usize].into_iter().chain([1.0]))
+            })
+            .collect();
+        let mut out = vec![0i8; caps.len()];
+        crate::evaluate_simd::cap_signs(&data, l, &mut out);
+        out
+    }
+
+    /// Every compiled version of the kernel this machine can run.
+    fn versions(ix: &IndexedCaps, l: Light) -> Vec<(&'static str, Vec<i8>)> {
+        let mut v = Vec::new();
+        let mut o = vec![0i8; ix.len()];
+        signs_impl::<false>(&ix.points, &ix.sorted, &ix.odd, l, &mut o);
+        v.push(("plain", o.clone()));
+        ix.cap_signs(l, &mut o);
+        v.push(("dispatch", o.clone()));
+        #[cfg(target_arch = "x86_64")]
+        if crate::evaluate_simd::have_avx2() {
+            // SAFETY: only when the CPU has AVX2.
+            unsafe { signs_avx2(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
+            v.push(("avx2", o));
+        }
+        v
+    }
+
+    #[test]
+    fn equals_record_kernel_bit_for_bit() {
+        for seed in 1..=6u64 {
+            let p = table(300, seed);
+            let n = p.len() as u64;
+            let mut next = test_rng(seed * 7919);
+            // Random triangles in every stored order, a few with repeated
+            // corners (degenerate: ties inside one triangle).
+            let mut caps = Vec::new();
+            for t in 0..2000 {
+                let mut c = [0u32; 3].map(|_| (next() % n) as u32);
+                if t % 50 == 0 {
+                    c[2] = c[0];
+                }
+                let perm = PERMS[t % 6];
+                caps.push([c[perm[0]], c[perm[1]], c[perm[2]]]);
+            }
+            let ix = IndexedCaps::new(&p, &caps).expect("a strictly increasing table");
+            let corner = p[(next() % n) as usize];
+            let lights = [
+                [0.3, -2.0, 1.7, 1.0],
+                [1.0, 0.5, -0.25, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+                [corner[0], corner[1], corner[2], 1.0],
+                [0.5, 0.5, 0.5, 1.0],
+            ];
+            for l in lights {
+                let want = by_records(&p, &caps, l);
+                assert!(want.iter().any(|&s| s != 0));
+                for (name, got) in versions(&ix, l) {
+                    let bad = got.iter().zip(&want).position(|(g, w)| g != w);
+                    assert_eq!(
+                        bad, None,
+                        "{name}, seed {seed}, light {l:?}: first wrong triangle"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn declines_tables_that_are_not_strictly_increasing() {
+        let caps = [[0, 1, 2]];
+        let ok = [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]];
+        assert!(IndexedCaps::new(&ok, &caps).is_some());
+        // ±0.0: distinct bits, equal positions.
+        let zeros = [[0.0, -0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        assert!(IndexedCaps::new(&zeros, &caps).is_none());
+        let nan = [[0.0, 0.0, 0.0], [f32::NAN, 0.0, 1.0], [1.0, 0.0, 0.0]];
+        assert!(IndexedCaps::new(&nan, &caps).is_none());
+        let unsorted = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [2.0, 0.0, 0.0]];
+        assert!(IndexedCaps::new(&unsorted, &caps).is_none());
+        assert!(IndexedCaps::new(&ok, &[[0, 1, 3]]).is_none());
+    }
+}
