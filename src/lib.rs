@@ -11,6 +11,7 @@ pub mod evaluate_simd;
 pub mod exact;
 pub mod format;
 pub mod hardcases;
+mod hint;
 pub mod layout;
 pub mod lint;
 pub mod load;
