@@ -46,23 +46,25 @@ pub fn canonical(v: f32) -> f32 {
 
 /// Maps an f32 to a u32 whose unsigned order equals the float order (for
 /// non-NaN values; `-0.0` must already be canonical).
+///
+/// Branch-free (flip the sign bit of positives, every bit of negatives):
+/// signs of mesh coordinates are close to random, and a branch here
+/// mispredicted on every other vertex.
 #[inline(always)]
 fn order_key(v: f32) -> u32 {
     let b = v.to_bits();
-    if b & 0x8000_0000 != 0 {
-        !b
-    } else {
-        b | 0x8000_0000
-    }
+    b ^ (((b as i32 >> 31) as u32) | 0x8000_0000)
 }
 
-/// Triangles per parallel block of the degenerate filter.
-const TRI_BLOCK: usize = 1 << 14;
+/// Inverse of [`order_key`]: the float whose key is `k`.
+#[inline(always)]
+fn from_order_key(k: u32) -> f32 {
+    f32::from_bits(k ^ ((((!k) as i32 >> 31) as u32) | 0x8000_0000))
+}
 
 /// One sortable word per input vertex: the position's order key in the high
-/// 96 bits, the vertex's input index in the low 32. Sorting these words sorts
-/// by position, and equal positions by index, so the order is total and no
-/// two words are equal.
+/// 96 bits, the vertex's input index in the low 32. Runs of equal keys in the
+/// sorted words are the welded vertices.
 #[inline(always)]
 fn vertex_word(p: [f32; 3], index: usize) -> u128 {
     ((order_key(canonical(p[0])) as u128) << 96)
@@ -71,88 +73,467 @@ fn vertex_word(p: [f32; 3], index: usize) -> u128 {
         | index as u128
 }
 
+/// The position part of a word.
+#[inline(always)]
+fn key(w: u128) -> u128 {
+    w >> 32
+}
+
+/// The canonical position whose order key is the key of `w`: the position
+/// of every vertex whose word has that key, without a gather from the input.
+#[inline(always)]
+fn word_position(w: u128) -> [f32; 3] {
+    [
+        from_order_key((w >> 96) as u32),
+        from_order_key((w >> 64) as u32),
+        from_order_key((w >> 32) as u32),
+    ]
+}
+
+/// Slices of at most this many words are insertion sorted, and buckets of
+/// at most this many words left to the final insertion sort of
+/// [`counting_pass`].
+const SMALL_SORT: usize = 32;
+
+/// Widest digit of a [`counting_pass`], in bits: at most 4096 counts, which
+/// stay in L1; longer slices take more than one pass.
+const MAX_DIGIT: u32 = 12;
+
+/// Sorts `w` in place; the compares are branchy but the slice is short.
+fn insertion_sort(w: &mut [u128]) {
+    for i in 1..w.len() {
+        let x = w[i];
+        let mut j = i;
+        while j > 0 && w[j - 1] > x {
+            w[j] = w[j - 1];
+            j -= 1;
+        }
+        w[j] = x;
+    }
+}
+
+/// [`insertion_sort`] of `src` into `dst` (same length). On words that are
+/// already nearly in order this is one predictable compare per word.
+fn insertion_sort_into(src: &[u128], dst: &mut [u128]) {
+    for (i, &x) in src.iter().enumerate() {
+        let mut j = i;
+        while j > 0 && dst[j - 1] > x {
+            dst[j] = dst[j - 1];
+            j -= 1;
+        }
+        dst[j] = x;
+    }
+}
+
+/// Smallest and largest value over `a` of the key component (32 bits) at
+/// bit `SHIFT`.
+#[inline(always)]
+fn component_range<const SHIFT: u32>(a: &[u128]) -> (u32, u32) {
+    a.iter().fold((u32::MAX, 0), |(lo, hi), &w| {
+        let c = (w >> SHIFT) as u32;
+        (lo.min(c), hi.max(c))
+    })
+}
+
+/// Sorts the words of `a` by key, in place; `scratch` is as long as `a`.
+/// Words with equal keys may end up in any order: nothing downstream
+/// depends on it.
+///
+/// Method: [`counting_pass`] on the first key component (x, y or z) that is
+/// not the same in every word. One monomorphised pass per component keeps
+/// the shifts constant.
+fn sort_words(a: &mut [u128], scratch: &mut [u128], counts: &mut Vec<u32>) {
+    debug_assert_eq!(a.len(), scratch.len());
+    if a.len() <= SMALL_SORT {
+        insertion_sort(a);
+        return;
+    }
+    let (lo, hi) = component_range::<96>(a);
+    if lo != hi {
+        return counting_pass::<96>(a, scratch, counts, lo, hi - lo);
+    }
+    let (lo, hi) = component_range::<64>(a);
+    if lo != hi {
+        return counting_pass::<64>(a, scratch, counts, lo, hi - lo);
+    }
+    let (lo, hi) = component_range::<32>(a);
+    if lo != hi {
+        counting_pass::<32>(a, scratch, counts, lo, hi - lo);
+    }
+    // Otherwise every key is equal: nothing to order.
+}
+
+/// Part of [`sort_words`]: all words of `a` agree on the key components
+/// before the one at bit `SHIFT`, whose values span `base..=base + range`
+/// (`range > 0`).
+///
+/// A counting sort into one to two buckets per word, then one insertion sort
+/// over the whole slice. The bucket is the component minus `base`, shifted
+/// right until it fits: non-decreasing in the key, because the components
+/// before it are equal. Most buckets then hold at most one or two words, so
+/// the slice comes out of the counting sort nearly sorted and the insertion
+/// sort costs about one predictable compare per word, with no walk over
+/// small buckets. Buckets too long for that (many words on one x, as on the
+/// grid planes of a marching-cubes surface) are sorted the same way first.
+/// The smallest and largest words land in different buckets, so every
+/// bucket is shorter than `a` and the recursion ends.
+fn counting_pass<const SHIFT: u32>(
+    a: &mut [u128],
+    scratch: &mut [u128],
+    counts: &mut Vec<u32>,
+    base: u32,
+    range: u32,
+) {
+    let bits = (usize::BITS - a.len().leading_zeros()).min(MAX_DIGIT);
+    let down = (u32::BITS - range.leading_zeros()).saturating_sub(bits);
+    let bucket = |w: u128| (((w >> SHIFT) as u32 - base) >> down) as usize;
+    // This pass's counts go on top of the callers' in `counts` (a stack, so
+    // no allocation per pass); indices, not a slice, because the recursion
+    // below pushes its own.
+    let first = counts.len();
+    let buckets = (range >> down) as usize + 1;
+    counts.resize(first + buckets, 0);
+    let count = &mut counts[first..];
+    for &w in a.iter() {
+        count[bucket(w)] += 1;
+    }
+    let mut sum = 0;
+    for c in count.iter_mut() {
+        let n = *c;
+        *c = sum;
+        sum += n;
+    }
+    for &w in a.iter() {
+        let c = &mut count[bucket(w)];
+        scratch[*c as usize] = w;
+        *c += 1;
+    }
+    // `counts[first + d]` is now the end of bucket d.
+    let mut begin = 0;
+    for d in first..first + buckets {
+        let end = counts[d] as usize;
+        if end - begin > SMALL_SORT {
+            sort_words(&mut scratch[begin..end], &mut a[begin..end], counts);
+        }
+        begin = end;
+    }
+    counts.truncate(first);
+    insertion_sort_into(scratch, a);
+}
+
+/// Number of distinct keys in sorted words.
+fn distinct_keys(sorted: &[u128]) -> usize {
+    match sorted.first() {
+        None => 0,
+        Some(_) => 1 + sorted.windows(2).filter(|p| key(p[0]) != key(p[1])).count(),
+    }
+}
+
+/// Vertices per parallel block of the vertex passes.
+const VERTEX_BLOCK: usize = 1 << 16;
+
+/// Most buckets of [`sort_vertices`]; bucket numbers are kept as `u16`.
+const MAX_BUCKETS: usize = 1 << 12;
+
+/// Writes the words ([`vertex_word`]) of all `positions` into `words` (as
+/// long), sorted by key, and returns the sorted words in consecutive groups
+/// that share no key, each with its number of distinct keys.
+///
+/// Method: a bucket sort on x, then [`sort_words`] within each bucket (the
+/// groups). The buckets split the range of finite x linearly, so they hold
+/// about the same number of vertices whatever the exponents: a radix digit
+/// on the raw key spends its first bits on sign and exponent, and on the
+/// Stanford dragon (x within ±0.11) an 11-bit one left all but 110 of its
+/// 2048 buckets empty. The bucket is a non-decreasing function of the key,
+/// so sorting within buckets sorts the whole. Each word is written once,
+/// straight into its bucket, and each bucket (about a hundred words) is then
+/// sorted in cache.
+fn sort_vertices<'w>(positions: &[[f32; 3]], words: &'w mut [u128]) -> Vec<(&'w [u128], usize)> {
+    use rayon::prelude::*;
+    let n = positions.len();
+    debug_assert_eq!(words.len(), n);
+    // Keys of the smallest and largest finite x; unreferenced vertices may
+    // hold anything, and non-finite x go to the first or last bucket.
+    let (kmin, kmax) = positions
+        .par_chunks(VERTEX_BLOCK)
+        .map(|c| {
+            c.iter()
+                .filter(|p| p[0].is_finite())
+                .map(|p| order_key(canonical(p[0])))
+                .fold((u32::MAX, 0), |(lo, hi), k| (lo.min(k), hi.max(k)))
+        })
+        .reduce(|| (u32::MAX, 0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    let buckets = if kmin < kmax {
+        (n / 128).next_power_of_two().clamp(1 << 8, MAX_BUCKETS)
+    } else {
+        1 // At most one finite x: linear buckets would hold everything.
+    };
+    let (xmin, xmax) = (from_order_key(kmin) as f64, from_order_key(kmax) as f64);
+    let scale = buckets as f64 / (xmax - xmin);
+    // Non-decreasing in the key: a monotone chain of rounded f64 operations
+    // and a saturating cast, which sends -inf to the first bucket and +inf
+    // to the last; NaN (which has a key too) goes by the sign of its key.
+    let bucket = |x: f32| -> usize {
+        let t = (x as f64 - xmin) * scale;
+        if buckets == 1 {
+            0
+        } else if t.is_nan() {
+            if order_key(x) > kmax { buckets - 1 } else { 0 }
+        } else {
+            (t as usize).min(buckets - 1)
+        }
+    };
+
+    // The bucket of every vertex (kept, so the scatter need not compute it
+    // again) and the size of every bucket.
+    let mut ids = vec![0u16; n];
+    let sizes = positions
+        .par_chunks(VERTEX_BLOCK)
+        .zip(ids.par_chunks_mut(VERTEX_BLOCK))
+        .map(|(c, ids)| {
+            let mut count = vec![0u32; buckets];
+            for (p, id) in c.iter().zip(ids) {
+                let b = bucket(p[0]);
+                *id = b as u16;
+                count[b] += 1;
+            }
+            count
+        })
+        .reduce(
+            || vec![0u32; buckets],
+            |mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+                a
+            },
+        );
+
+    // The scatter, in one part per thread: each part is a run of buckets
+    // (a contiguous range of `words`) and a pass over all vertices that
+    // writes only its own buckets' words. However the buckets are split,
+    // every bucket gets its vertices in input order, so the words are the
+    // same whatever the number of threads.
+    let parts = rayon::current_num_threads().clamp(1, buckets);
+    let mut jobs = Vec::with_capacity(parts);
+    let mut rest = &mut *words;
+    let (mut first, mut done) = (0, 0);
+    for part in 1..=parts {
+        // Buckets up to about part / parts of the words.
+        let mut last = first;
+        let mut size = 0;
+        while last < buckets && (done + size < n * part / parts || part == parts) {
+            size += sizes[last] as usize;
+            last += 1;
+        }
+        let (head, tail) = rest.split_at_mut(size);
+        jobs.push((first, last, head));
+        rest = tail;
+        first = last;
+        done += size;
+    }
+    jobs.into_par_iter().for_each(|(first, last, out)| {
+        if out.is_empty() {
+            return;
+        }
+        let mut next = vec![0u32; last - first];
+        let mut sum = 0;
+        for (c, &size) in next.iter_mut().zip(&sizes[first..last]) {
+            *c = sum;
+            sum += size;
+        }
+        for (i, (&p, &b)) in positions.iter().zip(&ids).enumerate() {
+            // Out-of-part buckets wrap around to past the end.
+            if let Some(c) = next.get_mut((b as usize).wrapping_sub(first)) {
+                out[*c as usize] = vertex_word(p, i);
+                *c += 1;
+            }
+        }
+    });
+    drop(ids);
+
+    // Each bucket sorted on its own, in parallel.
+    let mut groups = Vec::with_capacity(buckets);
+    let mut rest = words;
+    for &size in &sizes {
+        let (head, tail) = rest.split_at_mut(size as usize);
+        groups.push(head);
+        rest = tail;
+    }
+    groups
+        .into_par_iter()
+        .with_min_len(64)
+        .map_init(<(Vec<u128>, Vec<u32>)>::default, |(scratch, counts), g| {
+            if g.len() > SMALL_SORT {
+                scratch.resize(g.len(), 0);
+                sort_words(g, scratch, counts);
+            } else {
+                insertion_sort(g);
+            }
+            (&*g, distinct_keys(g))
+        })
+        .collect()
+}
+
+/// Triangles per parallel block of the degenerate filter.
+const TRI_BLOCK: usize = 1 << 14;
+
+/// Set in `run[v]` once a kept triangle uses vertex v; run ids stay below.
+const USED: u32 = 1 << 31;
+
 /// Welds the soup `positions`/`indices` (3 indices per triangle, all in range,
-/// all positions used by a triangle finite). Drops triangles with two equal
-/// welded corners.
+/// all positions used by a triangle finite, fewer than 2^31 distinct
+/// positions). Drops triangles with two equal welded corners.
 ///
 /// Method: one sort. Every input vertex becomes a 128-bit word (position key
 /// above index, [`vertex_word`]); after sorting, runs of equal position keys
 /// are the welded vertices, already in lexicographic order, so numbering the
 /// runs welds and orders in one pass. A hash map of positions followed by a
 /// sort of the distinct ones did the same work twice, with a cache miss per
-/// vertex in the map.
+/// vertex in the map. The sort is a bucket sort on x with a radix sort per
+/// bucket ([`sort_vertices`]); a comparison sort of the words was half of the
+/// time, mostly mispredicted compares.
+///
+/// Every step runs in fixed blocks or on disjoint ranges, and the result is
+/// the same whatever the number of threads.
 pub fn weld(positions: &[[f32; 3]], indices: &[u32]) -> Welded {
     use rayon::prelude::*;
-    // 1. Sort all input vertices by position. Words are distinct, so the
-    //    parallel unstable sort has one possible result whatever the threads.
-    let mut words: Vec<u128> = positions
-        .par_iter()
-        .enumerate()
-        .map(|(i, &p)| vertex_word(p, i))
-        .collect();
-    words.par_sort_unstable();
+    use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+    let n = positions.len();
+    let triangle_count = indices.len() / 3;
+    // The output triangles, and until step 3 writes them, the sort's words
+    // when they fit (16 bytes a vertex against 12 a triangle; closed meshes
+    // have about two triangles a vertex): the first touch of fresh memory
+    // (the kernel mapping and zeroing pages) costs about as much as the
+    // writes, so one buffer for both saves a buffer's worth.
+    let mut triangles = vec![0u32; 3 * triangle_count];
+    let mut own_words = Vec::new();
+    let words: &mut [u128] = match triangles
+        .get_mut(..4 * n)
+        .and_then(|t| bytemuck::try_cast_slice_mut(t).ok())
+    {
+        Some(w) => w,
+        None => {
+            own_words = vec![0u128; n];
+            &mut own_words
+        }
+    };
+
+    // 1. Sort all input vertices by position.
+    let groups = sort_vertices(positions, words);
 
     // 2. Number the runs of equal positions: `run[i]` is input vertex i's
-    //    welded id before unused vertices are removed.
-    let mut run = vec![0u32; positions.len()];
-    let mut run_first: Vec<u32> = Vec::with_capacity(positions.len());
-    let mut prev_key = None;
-    for &w in &words {
-        let key = w >> 32;
-        if prev_key != Some(key) {
-            prev_key = Some(key);
-            run_first.push(w as u32);
-        }
-        run[w as u32 as usize] = run_first.len() as u32 - 1;
+    //    welded id before unused vertices are removed. A run's position is
+    //    its key decoded. Groups share no key, so each numbers its runs from
+    //    its own offset, in parallel.
+    let runs: usize = groups.iter().map(|g| g.1).sum();
+    assert!(
+        runs < USED as usize,
+        "weld: 2^31 distinct positions or more"
+    );
+    let run: Vec<AtomicU32> = (0..n).into_par_iter().map(|_| AtomicU32::new(0)).collect();
+    let mut out_positions = vec![[0.0f32; 3]; runs];
+    let mut jobs = Vec::with_capacity(groups.len());
+    let mut rest = out_positions.as_mut_slice();
+    let mut first_run = 0;
+    for &(words, distinct) in &groups {
+        let (head, tail) = rest.split_at_mut(distinct);
+        jobs.push((words, head, first_run));
+        rest = tail;
+        first_run += distinct as u32;
     }
-    drop(words);
+    jobs.into_par_iter()
+        .with_min_len(64)
+        .for_each(|(words, out, first_run)| {
+            // Branch-free: every word writes its run's position (the same
+            // value for every word of a run), and the run id steps when the
+            // key changes.
+            let mut r = usize::MAX;
+            let mut prev_key = words.first().map_or(0, |&w| !key(w));
+            for &w in words {
+                r = r.wrapping_add((key(w) != prev_key) as usize);
+                prev_key = key(w);
+                out[r] = word_position(w);
+                run[w as u32 as usize].store(first_run + r as u32, Relaxed);
+            }
+        });
+    drop(groups);
+    drop(own_words);
 
-    // 3. Keep non-degenerate triangles, in run ids, in input order: fixed
-    //    blocks in parallel, concatenated in block order.
-    let kept: Vec<(Vec<u32>, Vec<u32>)> = indices
+    // 3. Triangles in run ids, in place, in fixed blocks in parallel; the
+    //    degenerate ones are listed (they are rare) and closed up after.
+    //    Every corner of a kept triangle marks its vertex USED, in the entry
+    //    of `run` it has just read; a mark is only ever set, so the result
+    //    is the same in any order.
+    let dropped: Vec<Vec<u32>> = indices
         .par_chunks(3 * TRI_BLOCK)
+        .zip(triangles.par_chunks_mut(3 * TRI_BLOCK))
         .enumerate()
-        .map(|(blk, block)| {
-            let mut tris = Vec::with_capacity(block.len());
-            let mut source = Vec::with_capacity(block.len() / 3);
-            for (i, c) in block.chunks_exact(3).enumerate() {
-                let (a, b, d) = (run[c[0] as usize], run[c[1] as usize], run[c[2] as usize]);
+        .map(|(blk, (block, out))| {
+            let mut dropped = Vec::new();
+            for (i, (c, o)) in block
+                .chunks_exact(3)
+                .zip(out.chunks_exact_mut(3))
+                .enumerate()
+            {
+                let r = [
+                    run[c[0] as usize].load(Relaxed),
+                    run[c[1] as usize].load(Relaxed),
+                    run[c[2] as usize].load(Relaxed),
+                ];
+                let (a, b, d) = (r[0] & !USED, r[1] & !USED, r[2] & !USED);
+                o.copy_from_slice(&[a, b, d]);
                 if a != b && b != d && a != d {
-                    tris.extend_from_slice(&[a, b, d]);
-                    source.push((blk * TRI_BLOCK + i) as u32);
+                    for (&v, &r) in c.iter().zip(&r) {
+                        run[v as usize].store(r | USED, Relaxed);
+                    }
+                } else {
+                    dropped.push((blk * TRI_BLOCK + i) as u32);
                 }
             }
-            (tris, source)
+            dropped
         })
         .collect();
-    let kept_count: usize = kept.iter().map(|k| k.1.len()).sum();
-    let degenerate = (indices.len() / 3 - kept_count) as u64;
-    let mut triangles = Vec::with_capacity(3 * kept_count);
-    let mut source_triangle = Vec::with_capacity(kept_count);
-    for (tris, source) in kept {
-        triangles.extend_from_slice(&tris);
-        source_triangle.extend_from_slice(&source);
-    }
-    let mut used = vec![false; run_first.len()];
-    for &v in &triangles {
-        used[v as usize] = true;
-    }
-    drop(run);
-
-    // 4. Drop unused runs (vertices no kept triangle references) and renumber
-    //    densely; the order stays lexicographic.
-    let mut rank = vec![u32::MAX; run_first.len()];
-    let mut out_positions = Vec::with_capacity(run_first.len());
-    for (r, &first) in run_first.iter().enumerate() {
-        if used[r] {
-            rank[r] = out_positions.len() as u32;
-            out_positions.push(positions[first as usize].map(canonical));
+    let dropped = dropped.concat();
+    let degenerate = dropped.len() as u64;
+    let source_triangle: Vec<u32> = if dropped.is_empty() {
+        (0..triangle_count as u32).into_par_iter().collect()
+    } else {
+        let mut source = Vec::with_capacity(triangle_count - dropped.len());
+        let mut begin = 0;
+        for end in dropped.iter().map(|&t| t as usize).chain([triangle_count]) {
+            triangles.copy_within(3 * begin..3 * end, 3 * source.len());
+            source.extend(begin as u32..end as u32);
+            begin = end + 1;
         }
-    }
-    if out_positions.len() != run_first.len() {
-        triangles
-            .par_iter_mut()
-            .for_each(|v| *v = rank[*v as usize]);
+        triangles.truncate(3 * source.len());
+        source
+    };
+
+    // 4. Drop unused runs (those no kept triangle references) and renumber
+    //    densely; the order stays lexicographic. Usually every vertex is
+    //    marked, which one scan shows.
+    if !run.par_iter().all(|r| r.load(Relaxed) & USED != 0) {
+        let mut used = vec![false; runs];
+        for r in &run {
+            let r = r.load(Relaxed);
+            if r & USED != 0 {
+                used[(r & !USED) as usize] = true;
+            }
+        }
+        let mut rank = vec![u32::MAX; runs];
+        let mut kept = 0;
+        for r in 0..runs {
+            if used[r] {
+                rank[r] = kept as u32;
+                out_positions[kept] = out_positions[r];
+                kept += 1;
+            }
+        }
+        if kept < runs {
+            out_positions.truncate(kept);
+            triangles
+                .par_iter_mut()
+                .for_each(|v| *v = rank[*v as usize]);
+        }
     }
 
     Welded {
@@ -284,5 +665,212 @@ mod tests {
             vec![[-2.0, 0.0, 0.0], [-1.0, -3.0, 0.0], [-1.0, 0.0, 0.0]]
         );
         assert_eq!(w.triangles, vec![0, 2, 1]);
+    }
+
+    /// Positions that stress the sort: grid planes (long runs of one x, and
+    /// of one x and y, as marching cubes makes), neighbours one ulp apart in
+    /// z only, both signs and both zeros, values either side of a power of
+    /// two, magnitudes from subnormal to huge, and repeats of positions from
+    /// far back in the input (another parallel block, another bucket part).
+    fn hard_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
+        let mut seed = seed;
+        let mut rng = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed >> 11
+        };
+        let unit = |r: u64| (r % 2001) as f32 / 1000.0 - 1.0;
+        let mut pos: Vec<[f32; 3]> = Vec::with_capacity(n);
+        while pos.len() < n {
+            let r = rng();
+            let old = pos.get((r >> 8) as usize % pos.len().max(1)).copied();
+            let p = match (r % 10, old) {
+                (0 | 1, _) => [
+                    (r >> 8) as f32 % 16.0 * 0.25 - 2.0,
+                    (r >> 12) as f32 % 8.0 * 0.25,
+                    unit(rng()),
+                ],
+                (2, Some(o)) => o,
+                (3, Some(o)) => {
+                    let z = if rng() % 2 == 0 { 1 } else { u32::MAX };
+                    let z = f32::from_bits(o[2].to_bits().wrapping_add(z));
+                    [o[0], o[1], if z.is_finite() { z } else { o[2] }]
+                }
+                (4, Some(o)) => [o[0], unit(rng()), unit(rng())],
+                (5, _) => [
+                    [0.0, -0.0][(r >> 8) as usize % 2],
+                    [0.0, -0.0, 1.0][(r >> 9) as usize % 3],
+                    [0.0, -0.0][(r >> 11) as usize % 2],
+                ],
+                (6, _) => {
+                    let near = [1.0f32, -1.0, 0.5, 2.0][(r >> 8) as usize % 4];
+                    let d = (r >> 10) as u32 % 5;
+                    [f32::from_bits(near.to_bits() + d - 2), near, -near]
+                }
+                (7, _) => {
+                    let bits = |r: u64| {
+                        let v = f32::from_bits(r as u32);
+                        if v.is_finite() { v } else { 1.5 }
+                    };
+                    [bits(rng()), bits(rng()), bits(rng())]
+                }
+                _ => [unit(r >> 8), unit(rng()), unit(rng())],
+            };
+            pos.push(p);
+        }
+        pos
+    }
+
+    fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(f)
+    }
+
+    #[test]
+    fn sort_matches_a_comparison_sort() {
+        // More vertices than two parallel blocks; non-finite x, which have
+        // buckets too; a lone huge x that leaves the other vertices a few
+        // buckets, and one x for all, so that long slices go through the
+        // radix passes of several components.
+        let mut pos = hard_positions(2 * VERTEX_BLOCK + 777, 7);
+        pos[10] = [f32::NAN, 0.0, 0.0];
+        pos[11] = [-f32::NAN, 1.0, 0.0];
+        pos[12] = [f32::INFINITY, 0.0, 0.0];
+        pos[13] = [f32::NEG_INFINITY, 0.0, 0.0];
+        let mut skewed = pos.clone();
+        skewed[14] = [3.0e38, 0.0, 0.0];
+        let one_x: Vec<[f32; 3]> = pos.iter().map(|p| [1.0, p[1], p[2]]).collect();
+        for pos in [pos, skewed, one_x] {
+            let mut expect: Vec<u128> = pos
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| vertex_word(p, i))
+                .collect();
+            expect.sort_unstable();
+            for threads in [1, 2, 3] {
+                let mut words = vec![0u128; pos.len()];
+                let groups = with_threads(threads, || {
+                    sort_vertices(&pos, &mut words)
+                        .into_iter()
+                        .map(|(g, distinct)| (g.len(), distinct))
+                        .collect::<Vec<_>>()
+                });
+                // Sorted by key, and the same words.
+                assert!(words.windows(2).all(|w| key(w[0]) <= key(w[1])));
+                let mut all = words.clone();
+                all.sort_unstable();
+                assert_eq!(all, expect);
+                // Groups cover the words, share no key, count their keys.
+                let mut begin = 0;
+                for (len, distinct) in groups {
+                    let g = &words[begin..begin + len];
+                    assert_eq!(distinct, distinct_keys(g));
+                    if begin > 0 && len > 0 {
+                        assert_ne!(key(words[begin - 1]), key(g[0]));
+                    }
+                    begin += len;
+                }
+                assert_eq!(begin, words.len());
+            }
+        }
+    }
+
+    /// [`naive`] with the first vertex of every position found in one pass,
+    /// for inputs too large for its search.
+    fn reference(pos: &[[f32; 3]], idx: &[u32]) -> Welded {
+        use std::collections::BTreeMap;
+        let key = |i: u32| pos[i as usize].map(canonical).map(order_key);
+        let mut out = Welded::default();
+        let mut kept = Vec::new();
+        let mut ids: BTreeMap<[u32; 3], u32> = BTreeMap::new();
+        for (t, c) in idx.chunks_exact(3).enumerate() {
+            let k = [key(c[0]), key(c[1]), key(c[2])];
+            if k[0] == k[1] || k[1] == k[2] || k[0] == k[2] {
+                out.degenerate += 1;
+            } else {
+                kept.push((t as u32, c));
+                for (k, &i) in k.into_iter().zip(c) {
+                    ids.entry(k).or_insert(i);
+                }
+            }
+        }
+        for (n, first) in ids.values_mut().enumerate() {
+            out.positions.push(pos[*first as usize].map(canonical));
+            *first = n as u32;
+        }
+        for (t, c) in kept {
+            out.triangles.extend(c.iter().map(|&i| ids[&key(i)]));
+            out.source_triangle.push(t);
+        }
+        out
+    }
+
+    #[test]
+    fn large_input_matches_reference_with_any_threads() {
+        let mut pos = hard_positions(3 * VERTEX_BLOCK, 11);
+        pos.push([f32::NAN, 0.0, 0.0]); // never referenced
+        pos.push([f32::INFINITY, 0.0, 0.0]); // never referenced
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rng = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed >> 11
+        };
+        // Mostly corners near each other in the input, as meshes have them,
+        // some anywhere; the last 1000 finite vertices are never used.
+        let used = (pos.len() - 2 - 1000) as u64;
+        let idx: Vec<u32> = (0..6 * pos.len() as u64)
+            .map(|i| {
+                let r = rng();
+                let v = if r % 4 == 0 {
+                    r >> 2
+                } else {
+                    i / 6 + (r >> 2) % 64
+                };
+                (v % used) as u32
+            })
+            .collect();
+        let expect = reference(&pos, &idx);
+        assert!(expect.degenerate > 0);
+        for threads in [1, 2, 3] {
+            let w = with_threads(threads, || weld(&pos, &idx));
+            assert_eq!(w.positions, expect.positions, "{threads} threads");
+            assert_eq!(w.triangles, expect.triangles, "{threads} threads");
+            assert_eq!(w.source_triangle, expect.source_triangle);
+            assert_eq!(w.degenerate, expect.degenerate);
+        }
+        // Every finite vertex once, in input order: no degenerate triangle
+        // (repeated positions aside) and fewer triangles than vertices, so
+        // the words do not fit in the triangle buffer.
+        let idx: Vec<u32> = (0..(pos.len() as u32 - 2) / 3 * 3).collect();
+        let expect = reference(&pos, &idx);
+        let w = weld(&pos, &idx);
+        assert_eq!(w.positions, expect.positions);
+        assert_eq!(w.triangles, expect.triangles);
+        assert_eq!(w.source_triangle, expect.source_triangle);
+        assert_eq!(w.degenerate, expect.degenerate);
+    }
+
+    #[test]
+    fn small_and_uniform_inputs() {
+        let empty = weld(&[], &[]);
+        assert!(empty.positions.is_empty() && empty.triangles.is_empty());
+        // One x for every vertex (a single bucket).
+        let pos: Vec<[f32; 3]> = (0..300)
+            .map(|i| [2.0, (i % 7) as f32, (i % 5) as f32])
+            .collect();
+        let idx: Vec<u32> = (0..300).rev().collect();
+        let (w, n) = (weld(&pos, &idx), naive(&pos, &idx));
+        assert_eq!((w.positions, w.triangles), (n.positions, n.triangles));
+        // One position for every vertex: every triangle degenerate.
+        let w = weld(&[[1.0, -0.0, 3.0]; 30], &(0..30).collect::<Vec<u32>>());
+        assert_eq!(w.degenerate, 10);
+        assert!(w.positions.is_empty() && w.triangles.is_empty());
+        assert!(w.source_triangle.is_empty());
     }
 }
