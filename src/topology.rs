@@ -160,26 +160,29 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
         .into_par_iter()
         .enumerate()
         .map_init(
-            || (Vec::new(), Vec::new()),
-            |(start, scratch): &mut (Vec<u32>, Vec<[u32; 4]>), (p, (recs, oo, ot))| {
-                sort_partition(recs, (p * PART) as u32, start, scratch);
-                let sorted = &scratch[..];
-                // About half the records of a closed mesh close an edge.
-                let mut out = Vec::with_capacity(sorted.len() / 2 + 16);
+            || (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
+            |(start, scratch, sorted, ends): &mut Bufs, (p, (recs, oo, ot))| {
+                sort_partition(recs, (p * PART) as u32, start, scratch, sorted);
+                let sorted = &sorted[..recs.len()];
+                // Every record writes an edge slot; only the last record of
+                // each (smaller, larger) run advances past it (no branch: it
+                // would mispredict on about every other record). Its range
+                // ends here, a global position in `opp`.
+                if ends.len() < sorted.len() {
+                    ends.resize(sorted.len(), [0; 3]);
+                }
                 let base = part_start[p] as u32;
+                let mut e = 0;
                 for (i, r) in sorted.iter().enumerate() {
                     oo[i] = r[2];
                     ot[i] = r[3];
-                    // The last record of each (smaller, larger) run closes
-                    // an edge; its range ends here (a global position).
                     let last = sorted
                         .get(i + 1)
-                        .is_none_or(|n| n[0] != r[0] || n[1] != r[1]);
-                    if last {
-                        out.push([r[0], r[1], base + i as u32 + 1]);
-                    }
+                        .is_none_or(|n| (n[0] != r[0]) | (n[1] != r[1]));
+                    ends[e] = [r[0], r[1], base + i as u32 + 1];
+                    e += usize::from(last);
                 }
-                out
+                ends[..e].to_vec()
             },
         )
         .collect();
@@ -218,10 +221,21 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
     edges
 }
 
+/// Per-thread buffers of pass 3: counting-sort offsets, the records by
+/// smaller endpoint, the records fully sorted, the partition's edges.
+type Bufs = (Vec<u32>, Vec<[u32; 4]>, Vec<[u32; 4]>, Vec<[u32; 3]>);
+
 /// Sorts one partition's records (smaller endpoints `base .. base + PART`)
-/// by (smaller, larger) endpoint, stably, into `scratch` (resized to
-/// `recs.len()`). `start` and `scratch` are reusable buffers.
-fn sort_partition(recs: &[[u32; 4]], base: u32, start: &mut Vec<u32>, scratch: &mut Vec<[u32; 4]>) {
+/// by (smaller, larger) endpoint, stably, into `sorted` (its first
+/// `recs.len()` entries). `start`, `scratch` and `sorted` are reusable
+/// buffers.
+fn sort_partition(
+    recs: &[[u32; 4]],
+    base: u32,
+    start: &mut Vec<u32>,
+    scratch: &mut Vec<[u32; 4]>,
+    sorted: &mut Vec<[u32; 4]>,
+) {
     // Counting sort by smaller endpoint into `scratch` (stable).
     start.clear();
     start.resize(PART + 1, 0);
@@ -231,8 +245,14 @@ fn sort_partition(recs: &[[u32; 4]], base: u32, start: &mut Vec<u32>, scratch: &
     for v in 0..PART {
         start[v + 1] += start[v];
     }
-    scratch.clear();
-    scratch.resize(recs.len(), [0; 4]);
+    // Both buffers are read and written SMALL_RUN records past the last
+    // run (see below). Every entry is written before it is read, so they
+    // only grow, never refill (zeroing 200 KB per partition showed).
+    let len = recs.len() + SMALL_RUN;
+    if scratch.len() < len {
+        scratch.resize(len, [0; 4]);
+        sorted.resize(len, [0; 4]);
+    }
     {
         let mut fill = [0u32; PART];
         fill.copy_from_slice(&start[..PART]);
@@ -244,24 +264,52 @@ fn sort_partition(recs: &[[u32; 4]], base: u32, start: &mut Vec<u32>, scratch: &
     }
     // Per smaller endpoint, order the records by larger endpoint, keeping
     // triangle order among equal ones. The runs are the vertex valence, a
-    // handful of records on real meshes: an inline insertion sort (stable)
-    // for those; longer runs (fans, dense CAD vertices) use the standard
-    // library's unstable sort on (larger endpoint, triangle), which gives the
-    // same order because a triangle has at most one half-edge per vertex pair,
-    // so the keys are distinct.
+    // handful of records on real meshes, and their lengths vary: any loop
+    // or copy over a run's own length mispredicts at its end, every run, so
+    // runs of up to SMALL_RUN records are sorted as fixed blocks of
+    // SMALL_RUN ([`rank_sort_block`]): the block is read whole (the records
+    // past the run are ignored) and written whole into `sorted` at the run's
+    // start; what lands past the run is overwritten by the next runs, which
+    // start there, or lies in the padding. Longer runs (fans, dense CAD
+    // vertices) use the standard library's unstable sort on (larger
+    // endpoint, triangle), which gives the same order because a triangle has
+    // at most one half-edge per vertex pair, so the keys are distinct.
     for v in 0..PART {
-        let run = &mut scratch[start[v] as usize..start[v + 1] as usize];
-        if run.len() <= 8 {
-            for i in 1..run.len() {
-                let mut j = i;
-                while j > 0 && run[j - 1][1] > run[j][1] {
-                    run.swap(j - 1, j);
-                    j -= 1;
-                }
-            }
+        let (s, e) = (start[v] as usize, start[v + 1] as usize);
+        if e - s <= SMALL_RUN {
+            let src: &[[u32; 4]; SMALL_RUN] = scratch[s..s + SMALL_RUN].try_into().unwrap();
+            let dst: &mut [[u32; 4]; SMALL_RUN] =
+                (&mut sorted[s..s + SMALL_RUN]).try_into().unwrap();
+            rank_sort_block(src, e - s, dst);
         } else {
+            let run = &mut scratch[s..e];
             run.sort_unstable_by_key(|r| (u64::from(r[1]) << 32) | u64::from(r[3]));
+            sorted[s..e].copy_from_slice(run);
         }
+    }
+}
+
+/// Longest run of records [`rank_sort_block`] sorts.
+const SMALL_RUN: usize = 8;
+
+/// Sorts the first `m` records of `src` by larger endpoint (`r[1]`),
+/// stably, into the first `m` of `dst`, without data-dependent branches:
+/// each record goes to its rank, the number of records with a smaller key or
+/// an equal key and a smaller index. Records at `m` and beyond get the
+/// largest key and so rank after every real one (larger key, or equal key
+/// and larger index): the real ones take ranks `0..m`, the rest fill
+/// `dst[m..]` with don't-cares, and the fixed-size loops unroll.
+#[inline(always)]
+fn rank_sort_block(src: &[[u32; 4]; SMALL_RUN], m: usize, dst: &mut [[u32; 4]; SMALL_RUN]) {
+    let keys: [u32; SMALL_RUN] = std::array::from_fn(|i| if i < m { src[i][1] } else { u32::MAX });
+    for i in 0..SMALL_RUN {
+        let mut rank = 0;
+        for (j, &k) in keys.iter().enumerate() {
+            rank += usize::from((k < keys[i]) | ((k == keys[i]) & (j < i)));
+        }
+        // The ranks are a permutation of 0..SMALL_RUN; the mask only spares
+        // the bounds check.
+        dst[rank & (SMALL_RUN - 1)] = src[i];
     }
 }
 
