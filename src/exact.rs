@@ -8,6 +8,11 @@
 //! integer times a power of two, so the determinant is an exact sum of 24
 //! integer products). `robust::orient3d` covers only finite points, which is
 //! why this exists.
+//!
+//! [`det4_sign_points`] and [`meet_points`] extend both to rows that are
+//! differences of two such points ([`Point::Away`]): the exact extrusion
+//! direction `P − L` of a corner away from a point light, which f32 cannot
+//! hold (the float contract rounds it).
 
 use num_bigint::BigInt;
 
@@ -81,6 +86,74 @@ pub fn det4_sign(r: [H; 4]) -> i32 {
     exact_sign(r)
 }
 
+/// A homogeneous point for [`det4_sign_points`] and [`meet_points`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Point {
+    /// A point or direction whose entries are f32 values, as for [`det4_sign`].
+    H(H),
+    /// `Away(p, l)` is the direction `(p − l, 0)` at infinity, exactly, for
+    /// finite points `p` and `l` (w = 1, f32 entries): where a point light
+    /// at `l` extrudes `p` to. The contract's `toInf` is its f32 rounding.
+    Away(H, H),
+}
+
+impl Point {
+    /// True for a point at infinity (a direction).
+    pub fn at_infinity(&self) -> bool {
+        match self {
+            Point::H(h) => h[3] == 0.0,
+            Point::Away(..) => true,
+        }
+    }
+}
+
+/// Sign (−1, 0, +1) of `det[r0; r1; r2; r3]` (rows), exactly, where a row
+/// `Away(p, l)` is `p − l`: by linearity in each row, the signed sum of up to
+/// 16 determinants with f32 entries.
+pub fn det4_sign_points(r: [Point; 4]) -> i32 {
+    if let [Point::H(a), Point::H(b), Point::H(c), Point::H(d)] = r {
+        return det4_sign([a, b, c, d]);
+    }
+    let mut dets: Vec<(i8, [H; 4])> = vec![(1, [[0.0; 4]; 4])];
+    for (i, row) in r.iter().enumerate() {
+        match *row {
+            Point::H(h) => dets.iter_mut().for_each(|d| d.1[i] = h),
+            Point::Away(p, l) => {
+                let mut minus = dets.clone();
+                dets.iter_mut().for_each(|d| d.1[i] = p);
+                minus.iter_mut().for_each(|d| {
+                    d.0 = -d.0;
+                    d.1[i] = l;
+                });
+                dets.extend(minus);
+            }
+        }
+    }
+    // Filter as in det4_sign, over all N = 24 · n products at once: each has
+    // relative error at most 3u, and summing N terms adds at most (N − 1)u of
+    // the sum of magnitudes; (N + 8) · 2u covers both with margin.
+    let mut sum = 0.0f64;
+    let mut mag = 0.0f64;
+    for (c, r) in &dets {
+        for (p, s) in PERMS.iter() {
+            let t = r[0][p[0]] * r[1][p[1]] * r[2][p[2]] * r[3][p[3]];
+            sum += if *s * *c > 0 { t } else { -t };
+            mag += t.abs();
+        }
+    }
+    let bound = mag * ((24 * dets.len() + 8) as f64 * f64::EPSILON);
+    if sum > bound {
+        return 1;
+    }
+    if sum < -bound {
+        return -1;
+    }
+    if mag == 0.0 {
+        return 0;
+    }
+    exact_sum_sign(&dets)
+}
+
 /// Decomposes an f32 value into `m · 2^e` with integer `m`.
 fn split(v: f64) -> (i64, i32) {
     let f = v as f32;
@@ -101,21 +174,28 @@ fn split(v: f64) -> (i64, i32) {
 }
 
 fn exact_sign(r: [H; 4]) -> i32 {
-    let parts: Vec<Vec<(i64, i32)>> = r
-        .iter()
-        .map(|row| row.iter().map(|&v| split(v)).collect())
-        .collect();
-    let mut terms: Vec<(i128, i32)> = Vec::with_capacity(24);
-    for (p, s) in PERMS.iter() {
-        let mut m: i128 = *s as i128;
-        let mut e = 0;
-        for (row, &col) in p.iter().enumerate() {
-            let (mi, ei) = parts[row][col];
-            m *= mi as i128;
-            e += ei;
-        }
-        if m != 0 {
-            terms.push((m, e));
+    exact_sum_sign(&[(1, r)])
+}
+
+/// Sign of `Σ c · det(r)` over `(c, r)` in `dets` (c = ±1), exactly.
+fn exact_sum_sign(dets: &[(i8, [H; 4])]) -> i32 {
+    let mut terms: Vec<(i128, i32)> = Vec::with_capacity(24 * dets.len());
+    for (c, r) in dets {
+        let parts: Vec<Vec<(i64, i32)>> = r
+            .iter()
+            .map(|row| row.iter().map(|&v| split(v)).collect())
+            .collect();
+        for (p, s) in PERMS.iter() {
+            let mut m: i128 = (*s * *c) as i128;
+            let mut e = 0;
+            for (row, &col) in p.iter().enumerate() {
+                let (mi, ei) = parts[row][col];
+                m *= mi as i128;
+                e += ei;
+            }
+            if m != 0 {
+                terms.push((m, e));
+            }
         }
     }
     let Some(emin) = terms.iter().map(|t| t.1).min() else {
@@ -151,10 +231,28 @@ pub enum Meet {
 /// a triangle whose corners are all at infinity is met where `b` is at
 /// infinity too, i.e. the crossing happens at the end of a ray).
 pub fn meet(a: H, b: H, t: [H; 3]) -> Meet {
-    let all_inf = t.iter().all(|v| v[3] == 0.0);
-    let fa = det4_sign([t[0], t[1], t[2], a]);
+    let v = [t[0], t[1], t[2], a, b];
+    meet_by(t.map(|c| c[3] == 0.0), |i| det4_sign(i.map(|k| v[k])))
+}
+
+/// [`meet`] for corners and end points that may be exact extrusion
+/// directions ([`Point::Away`]).
+pub fn meet_points(a: Point, b: Point, t: [Point; 3]) -> Meet {
+    let v = [t[0], t[1], t[2], a, b];
+    meet_by(t.map(|c| c.at_infinity()), |i| {
+        det4_sign_points(i.map(|k| v[k]))
+    })
+}
+
+/// The logic of [`meet`] on points 0, 1, 2 (the triangle, `inf` telling
+/// which corners are at infinity), 3 (`a`) and 4 (`b`), given the sign of
+/// the determinant of any four of them by index.
+#[inline(always)]
+fn meet_by(inf: [bool; 3], det: impl Fn([usize; 4]) -> i32) -> Meet {
+    let all_inf = inf.iter().all(|&i| i);
+    let fa = det([0, 1, 2, 3]);
     if !all_inf {
-        let fb = det4_sign([t[0], t[1], t[2], b]);
+        let fb = det([0, 1, 2, 4]);
         if fa != 0 && fa == fb {
             return Meet::None;
         }
@@ -168,11 +266,7 @@ pub fn meet(a: H, b: H, t: [H; 3]) -> Meet {
     } else if fa == 0 {
         return Meet::None;
     }
-    let s = [
-        det4_sign([a, b, t[0], t[1]]),
-        det4_sign([a, b, t[1], t[2]]),
-        det4_sign([a, b, t[2], t[0]]),
-    ];
+    let s = [det([3, 4, 0, 1]), det([3, 4, 1, 2]), det([3, 4, 2, 0])];
     let pos = s.iter().filter(|&&x| x > 0).count();
     let neg = s.iter().filter(|&&x| x < 0).count();
     if pos > 0 && neg > 0 {
@@ -233,6 +327,49 @@ mod tests {
         // Nearly coplanar: one ulp off the plane z = 0.3.
         let f = p(-5.5, 1e-30, f32::from_bits(0.3f32.to_bits() + 1));
         assert_ne!(det4_sign([a, b, c, f]), 0);
+    }
+
+    #[test]
+    fn differences_are_exact() {
+        // Where p − l is an f32 value, Away(p, l) is that direction.
+        let (a, b, c) = (p(0.0, 0.0, 0.0), p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0));
+        let (q, l) = (p(0.25, 0.5, 3.0), p(-0.5, 0.25, 1.0));
+        let dir = d(0.75, 0.25, 2.0);
+        for rows in [[a, b, c, dir], [a, dir, b, c], [dir, a, b, c]] {
+            let pts = rows.map(|r| {
+                if r == dir {
+                    Point::Away(q, l)
+                } else {
+                    Point::H(r)
+                }
+            });
+            assert_eq!(det4_sign_points(pts), det4_sign(rows));
+            assert_ne!(det4_sign(rows), 0);
+        }
+        // Where it is not: B − L rounds off the plane through A, B and L,
+        // but (A, B, B − L, L) are exactly coplanar.
+        let a = p(-1.0, -8.727_353_7e-7, 0.5);
+        let b = p(2.173_373_6e-7, 1.907_575_3e-7, -0.5);
+        let l = p(-0.5, 0.0, 0.0);
+        let rounded = d(b[0] as f32 - l[0] as f32, b[1] as f32, b[2] as f32);
+        assert_ne!(det4_sign([a, b, rounded, l]), 0);
+        let rows = [Point::H(a), Point::H(b), Point::Away(b, l), Point::H(l)];
+        assert_eq!(det4_sign_points(rows), 0);
+        // Two rows of differences (a side triangle with both corners at
+        // infinity): 4 determinants; swapping rows flips the sign.
+        let s = p(49.957_226, -550.836, 134.612_49);
+        let r = [
+            Point::H(b),
+            Point::Away(a, l),
+            Point::Away(b, l),
+            Point::H(s),
+        ];
+        let sign = det4_sign_points(r);
+        assert_ne!(sign, 0);
+        assert_eq!(det4_sign_points([r[0], r[2], r[1], r[3]]), -sign);
+        // det[B, A − L, B − L, S] = det[B, A, B, S] − det[B, A, L, S]
+        //   − det[B, L, B, S] + det[B, L, L, S] = −det[B, A, L, S].
+        assert_eq!(sign, -det4_sign([b, a, l, s]));
     }
 
     #[test]

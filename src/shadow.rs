@@ -8,13 +8,22 @@
 //! touches an edge, a vertex or a face exactly is *on a face*: reported
 //! separately, not compared.
 //!
+//! The emitted volume is not the exact one even when every orientation is:
+//! the contract extrudes corners to infinity in f32 (`toInf(P) = P − L`,
+//! rounded), which moves each side quad of a point light by up to 2^-24 of
+//! its extrusion direction, a large angle when the light is nearly on the
+//! edge's line. A sample in the wedge between an emitted side quad and its
+//! exact position is also *on a face* (within rounding of one): it is
+//! recognised exactly, as a sample where the volume with exact extrusions
+//! gives the truth and the emitted one does not (see [`check_shadow`]).
+//!
 //! Filters keep this fast: a bounding-volume hierarchy over the triangles
 //! (which are both the truth's occluders and the front caps) answers segment
 //! and ray queries conservatively; back caps, which all lie at infinity, are
 //! crossed or not depending only on the ray direction, so their contribution
 //! is computed once per direction.
 
-use crate::exact::{H, Meet, meet};
+use crate::exact::{H, Meet, Point, meet, meet_points};
 use crate::multiplicity::{Light, side_corner, to_infinity};
 use crate::verify::{Decoded, Evaluation, Rng};
 use rayon::prelude::*;
@@ -202,8 +211,14 @@ pub fn choose_samples(d: &Decoded, count: usize, seed: u64) -> Vec<[f32; 3]> {
 pub struct ShadowReport {
     /// Samples compared.
     pub samples: u64,
-    /// Samples lying exactly on a volume face (not compared).
+    /// Samples not compared: lying exactly on a volume face, or (see
+    /// `extrusion_rounding`) within the f32 rounding of one.
     pub on_faces: u64,
+    /// Of `on_faces`: samples whose winding differs from the truth only
+    /// because the contract extrudes corners to infinity in f32 (`toInf`):
+    /// the volume extruded exactly gives the truth there (see
+    /// [`check_shadow`]).
+    pub extrusion_rounding: u64,
     /// Samples whose winding number differs from the exact occluder count.
     pub mismatches: u64,
     /// The first mismatch, in words.
@@ -212,8 +227,9 @@ pub struct ShadowReport {
 
 /// Side triangles bucketed by their projection along a ray direction, over
 /// the projected bounds of the samples: a ray from P along the direction can
-/// only cross triangles whose projection contains P's (a conservative filter;
-/// the exact test decides).
+/// only cross triangles whose projection contains P's (a conservative filter,
+/// for both the emitted and the exactly extruded corners; the exact test
+/// decides).
 struct SideGrid {
     u: [f64; 3],
     v: [f64; 3],
@@ -278,8 +294,12 @@ impl SideGrid {
                 let scale = c[0].abs().max(c[1].abs()).max(c[2].abs());
                 if c[3] == 0.0 {
                     // A direction: the region is unbounded where it points.
+                    // The tolerance also covers the exact extrusion (`exact`
+                    // corners), which differs from this rounded one by at
+                    // most 2^-24 of each component: under 1.1e-7 · scale in
+                    // projection.
                     for k in 0..2 {
-                        let tol = 1e-9 * scale;
+                        let tol = 1e-6 * scale;
                         if q[k] > -tol {
                             bhi[k] = f64::INFINITY;
                         }
@@ -328,9 +348,12 @@ impl SideGrid {
     }
 }
 
-/// A triangle the shaders emit, with its stencil weight.
+/// A triangle the shaders emit, with its stencil weight: `corners` as
+/// emitted (corners at infinity rounded by the contract's `toInf`), `exact`
+/// the same triangle with those corners extruded exactly.
 struct Emitted {
     corners: [H; 3],
+    exact: [Point; 3],
     weight: i32,
 }
 
@@ -359,7 +382,31 @@ pub fn occluders(index: &ShadowIndex, light: Light, p: [f32; 3]) -> Option<u32> 
     (!ambiguous).then_some(count)
 }
 
+/// What a ray from a sample to infinity meets.
+enum Cast {
+    /// The winding number of the volume at the sample.
+    Winding(i32),
+    /// The sample lies on a triangle of the volume.
+    OnFace,
+    /// The ray touches an edge or vertex: try the next direction.
+    Degenerate,
+}
+
 /// Checks `samples` against the volume emitted under `ev` for `light`.
+///
+/// A sample whose winding differs from the truth is compared with a second
+/// volume first: the same triangles with the corners at infinity extruded
+/// exactly (`P − L`, [`Point::Away`]) instead of the contract's f32
+/// `toInf(P)`. If that volume's winding is the truth, the mismatch is the
+/// rounding of the extrusion alone: the sample lies between an emitted side
+/// quad and where the quad would be without rounding. Such a sample is
+/// counted in [`ShadowReport::on_faces`] (and in
+/// [`ShadowReport::extrusion_rounding`]), not compared. The wedge between the
+/// two is normally about 2^-24 rad wide; it is wide when a point light is
+/// nearly on an edge's line, where the side plane through the light and the
+/// edge is ill-conditioned (its angle error is about the rounding of `B − L`
+/// over the light's distance from the line). Directional lights extrude
+/// exactly (`toInf(P) = −L`), so only point lights have such samples.
 pub fn check_shadow(
     d: &Decoded,
     index: &ShadowIndex,
@@ -368,15 +415,34 @@ pub fn check_shadow(
     samples: &[[f32; 3]],
 ) -> ShadowReport {
     let inf = |p: [f32; 3]| hom(to_infinity(p, light));
+    let rounds = light[3] == 1.0;
+    let inf_exact = |p: [f32; 3]| {
+        if rounds {
+            Point::Away(fin(p), hom(light))
+        } else {
+            Point::H(inf(p))
+        }
+    };
     // Triangles with two equal corners (e.g. every back cap of a directional
     // light) have no area and no boundary: no ray crosses them. A corner
     // (0, 0, 0, 0) cannot occur (the contract gives 0 when the light is on a
-    // corner), but would be no point at all.
+    // corner), but would be no point at all. (`meet` answers `None` for both:
+    // every determinant with such a triangle is 0. So a triangle kept for one
+    // of its two versions is harmless in the other.)
     let usable = |c: &[H; 3]| {
         c[0] != c[1]
             && c[1] != c[2]
             && c[0] != c[2]
             && !c.iter().any(|h| h.iter().all(|&v| v == 0.0))
+    };
+    let usable_exact = |c: &[Point; 3]| {
+        c[0] != c[1]
+            && c[1] != c[2]
+            && c[0] != c[2]
+            && !c.iter().any(|p| match p {
+                Point::H(h) => h.iter().all(|&v| v == 0.0),
+                Point::Away(p, l) => p == l,
+            })
     };
     // Side triangles and back caps (front caps are the indexed triangles).
     let mut sides: Vec<Emitted> = Vec::new();
@@ -388,13 +454,22 @@ pub fn check_shadow(
             }
             let (pa, pb) = (d.positions[ids[0] as usize], d.positions[ids[1] as usize]);
             let quad = [fin(pa), fin(pb), inf(pa), inf(pb)];
+            let quad_exact = [
+                Point::H(fin(pa)),
+                Point::H(fin(pb)),
+                inf_exact(pa),
+                inf_exact(pb),
+            ];
             for tri in [[0, 1, 2], [3, 4, 5]] {
-                let corners = tri.map(|v| quad[side_corner(v, m as i32) as usize]);
+                let id = tri.map(|v| side_corner(v, m as i32) as usize);
+                let corners = id.map(|i| quad[i]);
+                let exact = id.map(|i| quad_exact[i]);
                 // A light exactly on A or B extrudes it to (0,0,0,0), which is
                 // no point at all: such a triangle has no area to cross.
-                if usable(&corners) {
+                if usable(&corners) || usable_exact(&exact) {
                     sides.push(Emitted {
                         corners,
+                        exact,
                         weight: m.unsigned_abs() as i32,
                     });
                 }
@@ -405,90 +480,120 @@ pub fn check_shadow(
         if c != 0 {
             let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
             let corners = [inf(t[2]), inf(p1), inf(p0)];
-            if usable(&corners) {
-                backs.push(Emitted { corners, weight: 1 });
+            let exact = [inf_exact(t[2]), inf_exact(p1), inf_exact(p0)];
+            if usable(&corners) || usable_exact(&exact) {
+                backs.push(Emitted {
+                    corners,
+                    exact,
+                    weight: 1,
+                });
             }
         }
     }
-    // Per-direction data, built on first use (by whichever thread needs it).
-    let back_terms: Vec<OnceLock<Option<i32>>> =
-        (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
+    // Per-direction data, built on first use (by whichever thread needs it);
+    // back-cap terms for the emitted and for the exactly extruded volume.
+    let back_terms: [Vec<OnceLock<Option<i32>>>; 2] =
+        [0, 1].map(|_| (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect());
     let grids: Vec<OnceLock<SideGrid>> = (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
-    let outcomes: Vec<(Option<i32>, i32, bool)> = samples
-        .par_iter()
-        .map(|&s| {
-            let p = fin(s);
-            let p3 = [p[0], p[1], p[2]];
-            let (truth, mut ambiguous) = match occluders(index, light, s) {
-                Some(n) => (n as i32, false),
-                None => (0, true),
-            };
-            // Winding: first direction whose ray touches nothing degenerately.
-            let mut winding = None;
-            for (k, dk) in DIRECTIONS.iter().enumerate() {
-                let dh = [dk[0] as f64, dk[1] as f64, dk[2] as f64, 0.0];
-                let Some(back) = *back_terms[k].get_or_init(|| {
-                    // Back caps meet the ray only at its end at infinity, where
-                    // the answer does not depend on P: any finite point will do.
-                    let mut sum = 0;
-                    for e in &backs {
-                        match meet([0.0, 0.0, 0.0, 1.0], dh, e.corners) {
-                            Meet::Cross(sg) => sum += sg * e.weight,
-                            Meet::None => {}
-                            _ => return None,
-                        }
-                    }
-                    Some(sum)
-                }) else {
-                    continue;
-                };
-                let mut w = back;
-                let mut ok = true;
-                let mut on_face = false;
-                let grid = grids[k].get_or_init(|| SideGrid::new(&sides, *dk, samples));
-                for &i in grid.candidates(s) {
-                    let e = &sides[i as usize];
-                    match meet(p, dh, e.corners) {
-                        Meet::Cross(sg) => w += sg * e.weight,
-                        Meet::None => {}
-                        Meet::AOnTriangle => on_face = true,
-                        Meet::Degenerate => ok = false,
-                    }
-                }
-                index
-                    .bvh
-                    .query(p3, [dh[0], dh[1], dh[2]], f64::INFINITY, |i| {
-                        let c = ev.caps[i as usize];
-                        if c == 0 {
-                            return;
-                        }
-                        let t = index.tris[i as usize];
-                        let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
-                        match meet(p, dh, [fin(p0), fin(p1), fin(t[2])]) {
-                            Meet::Cross(sg) => w += sg,
-                            Meet::None => {}
-                            Meet::AOnTriangle => on_face = true,
-                            Meet::Degenerate => ok = false,
-                        }
-                    });
-                if on_face {
-                    ambiguous = true;
-                    break;
-                }
-                if ok {
-                    winding = Some(w);
-                    break;
+    // Winding of the emitted volume (`exact` false) or of the exactly
+    // extruded one at sample `s`, along direction `k`.
+    let cast = |s: [f32; 3], k: usize, exact: bool| -> Cast {
+        let p = fin(s);
+        let p3 = [p[0], p[1], p[2]];
+        let dk = DIRECTIONS[k];
+        let dh = [dk[0] as f64, dk[1] as f64, dk[2] as f64, 0.0];
+        let meet_e = |a: H, e: &Emitted| {
+            if exact {
+                meet_points(Point::H(a), Point::H(dh), e.exact)
+            } else {
+                meet(a, dh, e.corners)
+            }
+        };
+        let Some(back) = *back_terms[exact as usize][k].get_or_init(|| {
+            // Back caps meet the ray only at its end at infinity, where
+            // the answer does not depend on P: any finite point will do.
+            let mut sum = 0;
+            for e in &backs {
+                match meet_e([0.0, 0.0, 0.0, 1.0], e) {
+                    Meet::Cross(sg) => sum += sg * e.weight,
+                    Meet::None => {}
+                    _ => return None,
                 }
             }
-            (winding, truth, ambiguous)
+            Some(sum)
+        }) else {
+            return Cast::Degenerate;
+        };
+        let mut w = back;
+        let mut ok = true;
+        let mut on_face = false;
+        let grid = grids[k].get_or_init(|| SideGrid::new(&sides, dk, samples));
+        for &i in grid.candidates(s) {
+            let e = &sides[i as usize];
+            match meet_e(p, e) {
+                Meet::Cross(sg) => w += sg * e.weight,
+                Meet::None => {}
+                Meet::AOnTriangle => on_face = true,
+                Meet::Degenerate => ok = false,
+            }
+        }
+        index
+            .bvh
+            .query(p3, [dh[0], dh[1], dh[2]], f64::INFINITY, |i| {
+                let c = ev.caps[i as usize];
+                if c == 0 {
+                    return;
+                }
+                let t = index.tris[i as usize];
+                let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
+                match meet(p, dh, [fin(p0), fin(p1), fin(t[2])]) {
+                    Meet::Cross(sg) => w += sg,
+                    Meet::None => {}
+                    Meet::AOnTriangle => on_face = true,
+                    Meet::Degenerate => ok = false,
+                }
+            });
+        if on_face {
+            Cast::OnFace
+        } else if ok {
+            Cast::Winding(w)
+        } else {
+            Cast::Degenerate
+        }
+    };
+    // First direction whose ray touches nothing degenerately; `None` when
+    // the sample is on a face (or every direction is degenerate).
+    let winding = |s: [f32; 3], exact: bool| -> Option<i32> {
+        for k in 0..DIRECTIONS.len() {
+            match cast(s, k, exact) {
+                Cast::Winding(w) => return Some(w),
+                Cast::OnFace => return None,
+                Cast::Degenerate => {}
+            }
+        }
+        None
+    };
+    // Per sample: the emitted winding (None: on a face), the truth (None:
+    // ambiguous), and whether a mismatch is the extrusion's rounding alone.
+    let outcomes: Vec<(Option<i32>, Option<i32>, bool)> = samples
+        .par_iter()
+        .map(|&s| {
+            let truth = occluders(index, light, s).map(|n| n as i32);
+            let w = truth.and(winding(s, false));
+            let rounding = rounds
+                && matches!((w, truth), (Some(w), Some(t)) if w != t)
+                && winding(s, true) == truth;
+            (w, truth, rounding)
         })
         .collect();
     let mut rep = ShadowReport::default();
-    for (&s, &(winding, truth, ambiguous)) in samples.iter().zip(&outcomes) {
-        match winding {
-            _ if ambiguous => rep.on_faces += 1,
-            None => rep.on_faces += 1,
-            Some(w) => {
+    for (&s, &(winding, truth, rounding)) in samples.iter().zip(&outcomes) {
+        match (winding, truth) {
+            (Some(_), Some(_)) if rounding => {
+                rep.on_faces += 1;
+                rep.extrusion_rounding += 1;
+            }
+            (Some(w), Some(truth)) => {
                 rep.samples += 1;
                 if w != truth {
                     rep.mismatches += 1;
@@ -500,7 +605,73 @@ pub fn check_shadow(
                     }
                 }
             }
+            _ => rep.on_faces += 1,
         }
     }
     rep
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluate::Strategy;
+    use crate::verify::{decode, evaluate, orientation_errors};
+
+    /// The shrunk case of `random_soups_verify` (tests/hard_cases.rs): two
+    /// triangles folded over the edge A = v0, B = v1, and a point light
+    /// 3.5e-7 from that edge's line, between A and B. Both orientations are
+    /// exact, but the side plane through L, A and B is ill-conditioned: the
+    /// f32 extrusion `toInf(B) = B − L` rounds x by 2.1e-8, which turns the
+    /// emitted side triangle (B, A∞, B∞) 1.19° about B. The sample lies in
+    /// that wedge (6.6 units from the exact plane, 5.1 from the emitted one):
+    /// the emitted volume gives winding 0 there, exactly 2 triangles lie
+    /// between it and the light.
+    #[test]
+    fn sample_in_the_rounding_wedge_of_an_extrusion_is_not_compared() {
+        let v = [
+            [-1.0, -8.727_353_7e-7, 0.5],
+            [2.173_373_6e-7, 1.907_575_3e-7, -0.5],
+            [26.664_402, -0.5, 1.0],
+            [243.194_99, 8.764_287e-7, 1.0],
+            [718.601_9, -4.526_546_6e-7, 740.013_24],
+        ];
+        let f = [[1, 0, 2], [0, 4, 1]];
+        let light: Light = [-0.5, 0.0, 0.0, 1.0];
+        let sample = [49.957_226, -550.836, 134.612_49];
+        let tmp = tempfile::tempdir().unwrap();
+        let (input, output) = (tmp.path().join("soup.obj"), tmp.path().join("soup.svpk"));
+        std::fs::write(&input, crate::hardcases::obj(&v, &f)).unwrap();
+        crate::build::build_file(&input, &output, &Default::default()).unwrap();
+        let d = decode(&crate::format::read_file(&output).unwrap(), 0);
+        let index = ShadowIndex::new(&d);
+        let ev = evaluate(&d, light, Strategy::Reference);
+        assert_eq!(orientation_errors(&d, light, &ev), 0);
+        assert_eq!(occluders(&index, light, sample), Some(2));
+        let r = check_shadow(&d, &index, light, &ev, &[sample]);
+        assert_eq!((r.samples, r.on_faces, r.mismatches), (0, 1, 0), "{r:?}");
+        assert_eq!(r.extrusion_rounding, 1);
+        // The rounded side quad: B∞ is off the plane through A, B and the
+        // light, and the sample is on opposite sides of the two.
+        let (a, b) = (fin(v[0]), fin(v[1]));
+        let (l, p) = (hom(light), fin(sample));
+        let b_inf = hom(to_infinity(v[1], light));
+        assert_ne!(b_inf[0], 0.5 + v[1][0] as f64);
+        let exact_side = crate::exact::det4_sign([a, b, l, p]);
+        assert_ne!(exact_side, 0);
+        // (A, B, B − L) spans the same plane as (A, B, L), with w reversed.
+        let exact_b_inf = Point::Away(b, l);
+        assert_eq!(
+            crate::exact::det4_sign_points([Point::H(a), Point::H(b), exact_b_inf, Point::H(p)]),
+            -exact_side
+        );
+        assert_eq!(crate::exact::det4_sign([a, b, b_inf, p]), exact_side);
+
+        // Not a licence for wrong volumes: the inverted volume (every sign
+        // negated) is wrong there with exact extrusions too, and is reported.
+        let mut inverted = ev.clone();
+        inverted.caps.iter_mut().for_each(|c| *c = -*c);
+        inverted.sides.iter_mut().flatten().for_each(|m| *m = -*m);
+        let r = check_shadow(&d, &index, light, &inverted, &[sample]);
+        assert_eq!((r.samples, r.on_faces, r.mismatches), (1, 0, 1), "{r:?}");
+    }
 }

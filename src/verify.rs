@@ -635,7 +635,10 @@ pub struct LightReport {
     pub closedness_violations: u64,
     /// Sample points compared with the exact shadow truth.
     pub samples: u64,
-    /// Sample points exactly on a volume face (reported, not compared).
+    /// Sample points exactly on a volume face, or within the f32 rounding of
+    /// a side quad's extrusion to infinity (a wedge that is wide only for a
+    /// point light nearly on the edge's line; see
+    /// [`crate::shadow::check_shadow`]): reported, not compared.
     pub samples_on_faces: u64,
     /// Samples whose volume winding number differs from the exact count of
     /// triangles between them and the light.
@@ -688,7 +691,8 @@ pub struct VerifyReport {
     pub closedness_violations: u64,
     /// Samples compared, summed over lights.
     pub samples: u64,
-    /// Samples on volume faces, summed over lights.
+    /// Samples on volume faces (exactly or within extrusion rounding),
+    /// summed over lights.
     pub samples_on_faces: u64,
     /// Shadow-truth mismatches, summed over lights.
     pub sample_mismatches: u64,
