@@ -98,34 +98,39 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // The evaluator `verify` uses: each triangle's sign once (caps), then
     // every side record as a signed sum of its triangles' signs; per light,
     // caps + sides. Reported per side record (edge instance), so it reads
-    // against sides/reference + caps/reference above. `_scalar` is the same
-    // computation through the loops it had before the vectorised kernel and
-    // gather (scalar caps, one checked `caps.get` per slot).
+    // against sides/reference + caps/reference above.
     g.throughput(Throughput::Elements(records as u64));
     // Floor of the shared evaluation: reading the bytes it must read (every
     // cap record once, the side slots' triangle ids and parities) with
     // nothing computed, per side record. On a mesh larger than the caches
     // this is memory bandwidth, which no kernel can beat.
+    // Every side slot's triangle id and parity, summed (read, nothing else).
+    let read_slots = || {
+        let mut acc = 0u32;
+        for bk in &d.buckets {
+            acc = acc.wrapping_add(bk.slot_tri.iter().fold(0u32, |a, &t| a.wrapping_add(t)));
+            acc = acc.wrapping_add(
+                bk.slot_parity
+                    .iter()
+                    .fold(0u32, |a, &p| a.wrapping_add(p as u32)),
+            );
+        }
+        acc
+    };
     g.bench_function("floor_read/shared_inputs", |b| {
         b.iter(|| {
             let mut acc = 0u32;
             for chunk in d.caps_data.chunks_exact(4) {
                 acc = acc.wrapping_add(chunk[0].to_bits());
             }
-            for bk in &d.buckets {
-                acc = acc.wrapping_add(bk.slot_tri.iter().fold(0u32, |a, &t| a.wrapping_add(t)));
-                acc = acc.wrapping_add(
-                    bk.slot_parity
-                        .iter()
-                        .fold(0u32, |a, &p| a.wrapping_add(p as u32)),
-                );
-            }
-            std::hint::black_box(acc)
+            std::hint::black_box(acc.wrapping_add(read_slots()))
         })
     });
     // Floor of the shared evaluation with caps from ids: reading the caps'
-    // corner ids, the position table and the side slots' triangle ids and
-    // parities, nothing computed.
+    // corner ids, the position table (12 bytes a point) and the side slots'
+    // triangle ids and parities, nothing computed: a little less than the
+    // evaluation reads (its table has 16-byte points, and a parity byte per
+    // triangle), so a lower bound.
     g.bench_function("floor_read/indexed_inputs", |b| {
         b.iter(|| {
             let mut acc = 0u32;
@@ -135,76 +140,56 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             for p in &d.positions {
                 acc = acc.wrapping_add(p[0].to_bits());
             }
-            for bk in &d.buckets {
-                acc = acc.wrapping_add(bk.slot_tri.iter().fold(0u32, |a, &t| a.wrapping_add(t)));
-                acc = acc.wrapping_add(
-                    bk.slot_parity
-                        .iter()
-                        .fold(0u32, |a, &p| a.wrapping_add(p as u32)),
-                );
-            }
-            std::hint::black_box(acc)
+            std::hint::black_box(acc.wrapping_add(read_slots()))
         })
     });
     g.bench_function("caps+sides/reference_shared", |b| {
         b.iter(|| pool.install(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
     });
-    // The same with the caps from the records (the shared evaluator before
-    // the ids), the peer of the line above.
-    g.bench_function("caps+sides/reference_shared_record_caps", |b| {
-        b.iter(|| {
-            pool.install(|| {
-                let mut caps = vec![0i8; d.caps.len()];
-                cap_signs_with(Strategy::Reference, &d.caps_data, light, &mut caps);
-                let sides: Vec<Vec<i8>> = d
-                    .buckets
-                    .iter()
-                    .map(|bk| {
-                        let mut m = vec![0i8; bk.records()];
-                        side_multiplicities_shared(
-                            Strategy::Reference,
-                            bk.k,
-                            &bk.data,
-                            &bk.slot_tri,
-                            &bk.slot_parity,
-                            &caps,
-                            light,
-                            &mut m,
-                        );
-                        m
-                    })
-                    .collect();
-                (caps, sides)
+    // The same computation with the caps from the records (the shared
+    // evaluator before the ids), the peer of the line above, and through the
+    // loops it had before the vectorised kernels and gather (scalar caps, one
+    // checked `caps.get` per slot).
+    for (label, caps_fn, shared) in [
+        (
+            "reference_shared_record_caps",
+            cap_signs_with as CapsFn,
+            side_multiplicities_shared as SharedFn,
+        ),
+        (
+            "reference_shared_scalar",
+            cap_signs_scalar,
+            side_multiplicities_shared_scalar,
+        ),
+    ] {
+        g.bench_function(format!("caps+sides/{label}"), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    let mut caps = vec![0i8; d.caps.len()];
+                    caps_fn(Strategy::Reference, &d.caps_data, light, &mut caps);
+                    let sides: Vec<Vec<i8>> = d
+                        .buckets
+                        .iter()
+                        .map(|bk| {
+                            let mut m = vec![0i8; bk.records()];
+                            shared(
+                                Strategy::Reference,
+                                bk.k,
+                                &bk.data,
+                                &bk.slot_tri,
+                                &bk.slot_parity,
+                                &caps,
+                                light,
+                                &mut m,
+                            );
+                            m
+                        })
+                        .collect();
+                    (caps, sides)
+                })
             })
-        })
-    });
-    g.bench_function("caps+sides/reference_shared_scalar", |b| {
-        b.iter(|| {
-            pool.install(|| {
-                let mut caps = vec![0i8; d.caps.len()];
-                cap_signs_scalar(Strategy::Reference, &d.caps_data, light, &mut caps);
-                let sides: Vec<Vec<i8>> = d
-                    .buckets
-                    .iter()
-                    .map(|bk| {
-                        let mut m = vec![0i8; bk.records()];
-                        side_multiplicities_shared_scalar(
-                            Strategy::Reference,
-                            bk.k,
-                            &bk.data,
-                            &bk.slot_tri,
-                            &bk.slot_parity,
-                            &caps,
-                            light,
-                            &mut m,
-                        );
-                        m
-                    })
-                    .collect();
-                (caps, sides)
-            })
-        })
-    });
+        });
+    }
     let caps = svpack::verify::evaluate(&d, light, Strategy::Reference).caps;
     for (label, shared) in [
         ("reference_shared", side_multiplicities_shared as SharedFn),

@@ -634,13 +634,7 @@ mod tests {
     fn fast_side_sign_is_the_contract_bit_for_bit() {
         // Coordinates from a tiny lattice make ties in x and y (the hard part
         // of the lexicographic order) and lights in planes common.
-        let mut seed = 99u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = crate::multiplicity::test_bits(99);
         for _ in 0..200_000 {
             let mut lattice = || [0, 1, 2].map(|_| ((next() % 3) as f32) * 0.5 - 0.5);
             let (a, b, o) = (lattice(), lattice(), lattice());

@@ -45,8 +45,9 @@ pub struct IndexedCaps {
 
 /// The three-comparator network of the contract (format-spec §3) on ids:
 /// the same comparator sequence, swapping only when the later id is
-/// strictly smaller, and the parity of the swaps.
-fn sort_ids(mut v: [u32; 3]) -> ([u32; 3], bool) {
+/// strictly smaller, and the parity of the swaps (true when odd). `verify`
+/// keys triangles by the same sort.
+pub(crate) fn sort_ids(mut v: [u32; 3]) -> ([u32; 3], bool) {
     let mut odd = false;
     for (i, j) in [(0, 1), (1, 2), (0, 1)] {
         if v[j] < v[i] {
@@ -105,11 +106,6 @@ impl IndexedCaps {
     /// True when there are no triangles.
     pub fn is_empty(&self) -> bool {
         self.sorted.is_empty()
-    }
-
-    /// Bytes read per light: ids and parities per triangle, and the table.
-    pub fn bytes_read(&self) -> usize {
-        self.sorted.len() * 13 + self.points.len() * 16
     }
 
     /// Reference orientation of every triangle for light `l`: `out[t]` is
@@ -205,21 +201,11 @@ mod tests {
     //! corners and directional lights; and the tables the equivalence does
     //! not hold for must be declined.
     use super::*;
-    use crate::multiplicity::PERMS;
-
-    /// Xorshift64, fixed seeds: failures reproduce.
-    fn test_rng(mut seed: u64) -> impl FnMut() -> u64 {
-        move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        }
-    }
+    use crate::multiplicity::{PERMS, test_bits};
 
     /// A sorted, deduplicated table with many equal x and y coordinates.
     fn table(n: usize, seed: u64) -> Vec<[f32; 3]> {
-        let mut next = test_rng(seed);
+        let mut next = test_bits(seed);
         let mut coord = move || {
             const LATTICE: [f32; 7] = [-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 1e-7];
             let r = next();
@@ -271,7 +257,7 @@ mod tests {
         for seed in 1..=6u64 {
             let p = table(300, seed);
             let n = p.len() as u64;
-            let mut next = test_rng(seed * 7919);
+            let mut next = test_bits(seed * 7919);
             // Random triangles in every stored order, a few with repeated
             // corners (degenerate: ties inside one triangle).
             let mut caps = Vec::new();

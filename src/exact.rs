@@ -62,18 +62,27 @@ const PERMS: [([usize; 4], i8); 24] = {
 
 /// Sign (−1, 0, +1) of `det[r0; r1; r2; r3]` (rows), exactly.
 pub fn det4_sign(r: [H; 4]) -> i32 {
-    // Filter: Leibniz sum in f64. Each product of four f32 values has
-    // relative error at most 3u (u = 2^-53; no overflow or underflow is
-    // possible for f32 inputs), and summing 24 terms adds at most 23u of the
-    // sum of magnitudes; 32u covers both with margin.
+    sum_sign(&[(1, r)])
+}
+
+/// Sign of `Σ c · det(r)` over `(c, r)` in `dets` (c = ±1, f32 entries),
+/// exactly. Filter: the Leibniz sums in f64. Each product of four f32
+/// values has relative error at most 3u (u = 2^-53; no overflow or
+/// underflow is possible for f32 inputs), and summing the N = 24 · n terms
+/// adds at most (N − 1)u of the sum of magnitudes; (N + 8)u covers both
+/// with margin (32u for one determinant). Big integers when it cannot
+/// decide.
+fn sum_sign(dets: &[(i8, [H; 4])]) -> i32 {
     let mut sum = 0.0f64;
     let mut mag = 0.0f64;
-    for (p, s) in PERMS.iter() {
-        let t = r[0][p[0]] * r[1][p[1]] * r[2][p[2]] * r[3][p[3]];
-        sum += if *s > 0 { t } else { -t };
-        mag += t.abs();
+    for (c, r) in dets {
+        for (p, s) in PERMS.iter() {
+            let t = r[0][p[0]] * r[1][p[1]] * r[2][p[2]] * r[3][p[3]];
+            sum += if *s * *c > 0 { t } else { -t };
+            mag += t.abs();
+        }
     }
-    let bound = mag * (32.0 * f64::EPSILON / 2.0);
+    let bound = mag * ((24 * dets.len() + 8) as f64 * f64::EPSILON / 2.0);
     if sum > bound {
         return 1;
     }
@@ -83,7 +92,7 @@ pub fn det4_sign(r: [H; 4]) -> i32 {
     if mag == 0.0 {
         return 0;
     }
-    exact_sign(r)
+    exact_sum_sign(dets)
 }
 
 /// A homogeneous point for [`det4_sign_points`] and [`meet_points`].
@@ -129,29 +138,7 @@ pub fn det4_sign_points(r: [Point; 4]) -> i32 {
             }
         }
     }
-    // Filter as in det4_sign, over all N = 24 · n products at once: each has
-    // relative error at most 3u, and summing N terms adds at most (N − 1)u of
-    // the sum of magnitudes; (N + 8) · 2u covers both with margin.
-    let mut sum = 0.0f64;
-    let mut mag = 0.0f64;
-    for (c, r) in &dets {
-        for (p, s) in PERMS.iter() {
-            let t = r[0][p[0]] * r[1][p[1]] * r[2][p[2]] * r[3][p[3]];
-            sum += if *s * *c > 0 { t } else { -t };
-            mag += t.abs();
-        }
-    }
-    let bound = mag * ((24 * dets.len() + 8) as f64 * f64::EPSILON);
-    if sum > bound {
-        return 1;
-    }
-    if sum < -bound {
-        return -1;
-    }
-    if mag == 0.0 {
-        return 0;
-    }
-    exact_sum_sign(&dets)
+    sum_sign(&dets)
 }
 
 /// Decomposes an f32 value into `m · 2^e` with integer `m`.
@@ -171,10 +158,6 @@ fn split(v: f64) -> (i64, i32) {
         (frac | 0x80_0000, exp - 150)
     };
     (sign * m, e)
-}
-
-fn exact_sign(r: [H; 4]) -> i32 {
-    exact_sum_sign(&[(1, r)])
 }
 
 /// Sign of `Σ c · det(r)` over `(c, r)` in `dets` (c = ±1), exactly.

@@ -187,16 +187,24 @@ pub(crate) const PERMS: [[usize; 3]; 6] = [
     [2, 1, 0],
 ];
 
-/// Xorshift generator of f32 in [-1, 1) for the unit tests here and in
-/// `evaluate` (fixed seeds, so failures reproduce).
+/// Xorshift64 for the unit tests of the crate (fixed seeds, so failures
+/// reproduce): the successive states.
 #[cfg(test)]
-pub(crate) fn test_rng(mut seed: u64) -> impl FnMut() -> f32 {
+pub(crate) fn test_bits(mut seed: u64) -> impl FnMut() -> u64 {
     move || {
         seed ^= seed << 13;
         seed ^= seed >> 7;
         seed ^= seed << 17;
-        (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        seed
     }
+}
+
+/// [`test_bits`] as f32 in [-1, 1), for the unit tests here and in
+/// `evaluate`.
+#[cfg(test)]
+pub(crate) fn test_rng(seed: u64) -> impl FnMut() -> f32 {
+    let mut bits = test_bits(seed);
+    move || (bits() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
 }
 
 #[cfg(test)]

@@ -415,13 +415,8 @@ mod tests {
         // non-manifold edges, duplicates in both windings), plus a vertex
         // with a large fan straddling the insertion-sort limit.
         let vertices = 3 * PART + 77;
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rng = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed >> 11
-        };
+        let mut bits = crate::multiplicity::test_bits(0x9e37_79b9_7f4a_7c15u64);
+        let mut rng = move || bits() >> 11;
         let mut tris = Vec::new();
         while tris.len() < 3 * (TRI_BLOCK + 5000) {
             let a = (rng() % vertices as u64) as u32;

@@ -73,16 +73,12 @@ impl DecodedBucket {
 /// Sentinel id of a sides position that appears in no caps triangle.
 pub const UNKNOWN: u32 = u32::MAX;
 
-/// Ids in increasing order and the parity of the sorting permutation.
-fn sort_ids(mut v: [u32; 3]) -> ([u32; 3], i8) {
-    let mut parity = 1;
-    for (i, j) in [(0, 1), (1, 2), (0, 1)] {
-        if v[j] < v[i] {
-            v.swap(i, j);
-            parity = -parity;
-        }
-    }
-    (v, parity)
+/// Ids in increasing order and the parity (+1 even, −1 odd) of the sorting
+/// permutation: the contract's network on ids
+/// ([`crate::evaluate_indexed::sort_ids`]).
+fn sort_ids(v: [u32; 3]) -> ([u32; 3], i8) {
+    let (v, odd) = crate::evaluate_indexed::sort_ids(v);
+    (v, if odd { -1 } else { 1 })
 }
 
 fn bits(p: [f32; 3]) -> [u32; 3] {

@@ -594,50 +594,13 @@ mod tests {
         assert_eq!(w.source_triangle, vec![0]);
     }
 
-    /// The obvious implementation: a sorted map of canonical positions.
-    fn naive(pos: &[[f32; 3]], idx: &[u32]) -> Welded {
-        use std::collections::BTreeMap;
-        let key = |i: u32| pos[i as usize].map(canonical).map(order_key);
-        let mut kept = Vec::new();
-        let mut out = Welded::default();
-        for (t, c) in idx.chunks_exact(3).enumerate() {
-            let k = [key(c[0]), key(c[1]), key(c[2])];
-            if k[0] == k[1] || k[1] == k[2] || k[0] == k[2] {
-                out.degenerate += 1;
-            } else {
-                kept.push((t as u32, c));
-            }
-        }
-        let mut ids: BTreeMap<[u32; 3], u32> = BTreeMap::new();
-        for (_, c) in &kept {
-            for &i in c.iter() {
-                ids.insert(key(i), 0);
-            }
-        }
-        for (n, (k, id)) in ids.iter_mut().enumerate() {
-            *id = n as u32;
-            let first = (0..pos.len() as u32).find(|&i| key(i) == *k).unwrap();
-            out.positions.push(pos[first as usize].map(canonical));
-        }
-        for (t, c) in kept {
-            out.triangles.extend(c.iter().map(|&i| ids[&key(i)]));
-            out.source_triangle.push(t);
-        }
-        out
-    }
-
     #[test]
     fn matches_the_obvious_implementation() {
         // A lattice small enough that positions repeat (weld), with -0.0,
         // degenerate triangles, an unused and a NaN unreferenced vertex, and
         // more triangles than one parallel block.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rng = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed >> 11
-        };
+        let mut bits = crate::multiplicity::test_bits(0x2545_f491_4f6c_dd1du64);
+        let mut rng = move || bits() >> 11;
         let coord = |r: u64| [-1.0, -0.0, 0.0, 0.5, 1.0, 2.0][(r % 6) as usize];
         let mut pos: Vec<[f32; 3]> = (0..400)
             .map(|_| [coord(rng()), coord(rng()), coord(rng())])
@@ -648,7 +611,7 @@ mod tests {
             .map(|_| (rng() % 400) as u32)
             .collect();
         let w = weld(&pos, &idx);
-        let n = naive(&pos, &idx);
+        let n = reference(&pos, &idx);
         assert!(w.degenerate > 0 && w.positions.len() < 400);
         assert_eq!(w.positions, n.positions);
         assert_eq!(w.triangles, n.triangles);
@@ -673,13 +636,8 @@ mod tests {
     /// two, magnitudes from subnormal to huge, and repeats of positions from
     /// far back in the input (another parallel block, another bucket part).
     fn hard_positions(n: usize, seed: u64) -> Vec<[f32; 3]> {
-        let mut seed = seed;
-        let mut rng = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed >> 11
-        };
+        let mut bits = crate::multiplicity::test_bits(seed);
+        let mut rng = move || bits() >> 11;
         let unit = |r: u64| (r % 2001) as f32 / 1000.0 - 1.0;
         let mut pos: Vec<[f32; 3]> = Vec::with_capacity(n);
         while pos.len() < n {
@@ -779,8 +737,7 @@ mod tests {
         }
     }
 
-    /// [`naive`] with the first vertex of every position found in one pass,
-    /// for inputs too large for its search.
+    /// The obvious implementation: a sorted map of canonical positions.
     fn reference(pos: &[[f32; 3]], idx: &[u32]) -> Welded {
         use std::collections::BTreeMap;
         let key = |i: u32| pos[i as usize].map(canonical).map(order_key);
@@ -814,13 +771,8 @@ mod tests {
         let mut pos = hard_positions(3 * VERTEX_BLOCK, 11);
         pos.push([f32::NAN, 0.0, 0.0]); // never referenced
         pos.push([f32::INFINITY, 0.0, 0.0]); // never referenced
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rng = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed >> 11
-        };
+        let mut bits = crate::multiplicity::test_bits(0x9e37_79b9_7f4a_7c15u64);
+        let mut rng = move || bits() >> 11;
         // Mostly corners near each other in the input, as meshes have them,
         // some anywhere; the last 1000 finite vertices are never used.
         let used = (pos.len() - 2 - 1000) as u64;
@@ -865,7 +817,7 @@ mod tests {
             .map(|i| [2.0, (i % 7) as f32, (i % 5) as f32])
             .collect();
         let idx: Vec<u32> = (0..300).rev().collect();
-        let (w, n) = (weld(&pos, &idx), naive(&pos, &idx));
+        let (w, n) = (weld(&pos, &idx), reference(&pos, &idx));
         assert_eq!((w.positions, w.triangles), (n.positions, n.triangles));
         // One position for every vertex: every triangle degenerate.
         let w = weld(&[[1.0, -0.0, 3.0]; 30], &(0..30).collect::<Vec<u32>>());
