@@ -32,6 +32,27 @@ use sphere::sphere_obj;
 /// Signature of `side_multiplicities_shared` and its scalar peer.
 type SharedFn = fn(Strategy, usize, &[f32], &[u32], &[i8], &[i8], [f32; 4], &mut [i8]);
 
+/// `shared` (the reference strategy) over one decoded bucket.
+fn shared_bucket(
+    shared: SharedFn,
+    bk: &svpack::verify::DecodedBucket,
+    caps: &[i8],
+    light: [f32; 4],
+    out: &mut [i8],
+) {
+    let (tri, parity) = (&bk.slot_tri, &bk.slot_parity);
+    shared(
+        Strategy::Reference,
+        bk.k,
+        &bk.data,
+        tri,
+        parity,
+        caps,
+        light,
+        out,
+    )
+}
+
 fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("b.svpk");
@@ -172,16 +193,7 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
                         .iter()
                         .map(|bk| {
                             let mut m = vec![0i8; bk.records()];
-                            shared(
-                                Strategy::Reference,
-                                bk.k,
-                                &bk.data,
-                                &bk.slot_tri,
-                                &bk.slot_parity,
-                                &caps,
-                                light,
-                                &mut m,
-                            );
+                            shared_bucket(shared, bk, &caps, light, &mut m);
                             m
                         })
                         .collect();
@@ -200,16 +212,7 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             b.iter(|| {
                 pool.install(|| {
                     for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
-                        shared(
-                            Strategy::Reference,
-                            bk.k,
-                            &bk.data,
-                            &bk.slot_tri,
-                            &bk.slot_parity,
-                            &caps,
-                            light,
-                            o,
-                        );
+                        shared_bucket(shared, bk, &caps, light, o);
                     }
                 })
             })
