@@ -55,6 +55,9 @@ static ALLOC: svpack::alloc::HugePageAlloc = svpack::alloc::HugePageAlloc;
 #[path = "../examples/scene.rs"]
 mod scene;
 
+#[path = "common/peers.rs"]
+mod peers;
+
 /// Triangles of the generated scene.
 const SCENE_TRIANGLES: u64 = 1_000_000;
 
@@ -124,37 +127,6 @@ fn payload(m: &Mesh) -> MeshPayload<'_> {
     }
 }
 
-/// The peer of our glTF loader: file read, `gltf::Gltf::from_slice`, buffers
-/// (the GLB blob or files beside the input), and the crate's readers for the
-/// positions and indices of every triangle primitive. Returns the counts.
-fn gltf_crate_load(path: &Path) -> (usize, usize) {
-    let bytes = std::fs::read(path).unwrap();
-    let doc = gltf::Gltf::from_slice(&bytes).unwrap();
-    let buffers: Vec<Vec<u8>> = doc
-        .buffers()
-        .map(|b| match b.source() {
-            gltf::buffer::Source::Bin => doc.blob.clone().unwrap(),
-            gltf::buffer::Source::Uri(uri) => {
-                std::fs::read(path.parent().unwrap().join(uri)).unwrap()
-            }
-        })
-        .collect();
-    let (mut positions, mut indices) = (0, 0);
-    for mesh in doc.meshes() {
-        for prim in mesh.primitives() {
-            let r = prim.reader(|b| Some(&buffers[b.index()]));
-            let p: Vec<[f32; 3]> = r.read_positions().unwrap().collect();
-            let i: Vec<u32> = match r.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..p.len() as u32).collect(),
-            };
-            positions += p.len();
-            indices += i.len();
-        }
-    }
-    (positions, indices)
-}
-
 fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
     let adapter = meshopt::VertexDataAdapter::new(
         meshopt::typed_to_bytes(positions),
@@ -176,17 +148,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     // ours/tobj is our overhead on top of the parser.
     if m.path.extension().is_some_and(|e| e == "obj") {
         g.bench_function(format!("tobj/{n}"), |b| {
-            b.iter(|| {
-                let text = std::fs::read(black_box(&m.path)).unwrap();
-                let options = tobj::LoadOptions {
-                    single_index: false,
-                    triangulate: false,
-                    ignore_points: false,
-                    ignore_lines: false,
-                };
-                let mut reader = text.as_slice();
-                tobj::load_obj_buf(&mut reader, &options, |_| Ok(Default::default())).unwrap()
-            })
+            b.iter(|| peers::tobj_load(black_box(&m.path)))
         });
     }
     // For glTF: the gltf crate's own parse (JSON, validation, GLB container)
@@ -197,7 +159,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
         .is_some_and(|e| e == "glb" || e == "gltf")
     {
         g.bench_function(format!("gltf_crate/{n}"), |b| {
-            b.iter(|| gltf_crate_load(black_box(&m.path)))
+            b.iter(|| peers::gltf_crate_load(black_box(&m.path)))
         });
     }
     g.finish();

@@ -1460,14 +1460,19 @@ fn digest_covers_the_file_then_its_buffers_with_any_thread_count() {
     let dir = tempdir();
     let (bin, rest) = triangle_bin();
     let mut doc = bin.document(Some("tri.bin"), rest);
-    for pad in [0usize, 300 << 10] {
+    // Small file and buffer (hashed inline), large file, large buffer (the
+    // last two hashed beside the decoding with 2 threads). Bytes past the
+    // declared byteLength are still read, so they are in the digest.
+    for (pad, bin_pad) in [(0usize, 0usize), (300 << 10, 0), (0, 300 << 10)] {
         doc["asset"]["extras"] = json!({ "pad": "x".repeat(pad) });
         let text = serde_json::to_vec(&doc).unwrap();
         let p = dir.path().join("tri.gltf");
         std::fs::write(&p, &text).unwrap();
-        std::fs::write(dir.path().join("tri.bin"), &bin.bytes).unwrap();
+        let mut bin_bytes = bin.bytes.clone();
+        bin_bytes.resize(bin_bytes.len() + bin_pad, 0x17);
+        std::fs::write(dir.path().join("tri.bin"), &bin_bytes).unwrap();
         let mut all = text.clone();
-        all.extend_from_slice(&bin.bytes);
+        all.extend_from_slice(&bin_bytes);
         let expected: [u8; 32] = Sha256::digest(&all).into();
         for threads in [1, 2] {
             let pool = rayon::ThreadPoolBuilder::new()
@@ -1478,9 +1483,12 @@ fn digest_covers_the_file_then_its_buffers_with_any_thread_count() {
             assert_eq!(
                 soup.input_bytes,
                 all.len() as u64,
-                "pad {pad}, {threads} threads"
+                "pad {pad}/{bin_pad}, {threads} threads"
             );
-            assert_eq!(soup.input_sha256, expected, "pad {pad}, {threads} threads");
+            assert_eq!(
+                soup.input_sha256, expected,
+                "pad {pad}/{bin_pad}, {threads} threads"
+            );
             assert_eq!(soup.indices, vec![0, 1, 2]);
         }
     }

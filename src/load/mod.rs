@@ -96,27 +96,23 @@ impl InputDigest {
 /// thread costs tens of microseconds, about what hashing this much takes.
 const CONCURRENT_DIGEST_MIN: usize = 256 << 10;
 
-/// Runs `work` on this thread while another thread computes
-/// [`InputDigest::of`]`(data)`, and returns both.
+/// Runs `work` on this thread while another thread computes the digest of
+/// `parts` (fed in order, as if read one after the other), and returns both.
 ///
-/// Why: hashing a large text file costs a few percent of parsing it, and the
-/// two are independent (`work` may read `data` too). It only uses a second
+/// Why: hashing a large file costs a few percent of parsing it, and the two
+/// are independent (`work` may read the same bytes). It only uses a second
 /// thread when the rayon pool the caller runs in has more than one, so
 /// `--threads 1` still means one core. The digest is the same either way.
-pub fn digest_while<T>(data: &[u8], work: impl FnOnce() -> T) -> ((u64, [u8; 32]), T) {
-    let (digest, result) = hash_while(data, work);
-    (digest.finish(), result)
-}
-
-/// [`digest_while`], with the digest left open so that more bytes (a glTF's
-/// external buffers, read by `work`) can follow `data` in it.
-pub fn hash_while<T>(data: &[u8], work: impl FnOnce() -> T) -> (InputDigest, T) {
+pub fn digest_while<T>(parts: &[&[u8]], work: impl FnOnce() -> T) -> ((u64, [u8; 32]), T) {
     let hash = || {
         let mut digest = InputDigest::default();
-        digest.update(data);
-        digest
+        for part in parts {
+            digest.update(part);
+        }
+        digest.finish()
     };
-    if data.len() < CONCURRENT_DIGEST_MIN || rayon::current_num_threads() < 2 {
+    let total: usize = parts.iter().map(|p| p.len()).sum();
+    if total < CONCURRENT_DIGEST_MIN || rayon::current_num_threads() < 2 {
         return (hash(), work());
     }
     std::thread::scope(|scope| {

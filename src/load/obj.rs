@@ -74,7 +74,7 @@ pub fn load_obj(path: &Path, data: Vec<u8>) -> Result<Soup> {
     // Hashing and parsing are independent; with more than one thread the
     // digest is computed beside the parse (see `digest_while`).
     let ((input_bytes, input_sha256), streamed) =
-        super::digest_while(&data, || guarded(|| parse_streaming(&data)));
+        super::digest_while(&[&data], || guarded(|| parse_streaming(&data)));
     let parsed = match streamed {
         Ok(Some(parsed)) => {
             // The text is no longer needed; free it before building the
