@@ -10,7 +10,9 @@
 //! - `check/ours/*`: `build::check_soup` (indices in range, finite positions);
 //! - `weld/ours/*`: `weld::weld`;
 //! - `topology/ours/*`: `topology::build_edges` (edges and all opposite
-//!   vertices), `topology/edge_stats/*`, and the peer in the same group,
+//!   vertices), `topology/previous_sort/*` (the method it replaced,
+//!   `common/topology_sort.rs`, as the baseline of that speed-up),
+//!   `topology/edge_stats/*`, and the peer in the same group,
 //!   `topology/meshopt_adjacency/*`: meshoptimizer's adjacency index buffer
 //!   (`meshopt::generate_adjacency_indices`) on the same welded positions
 //!   and indices;
@@ -58,6 +60,9 @@ mod scene;
 #[path = "common/peers.rs"]
 mod peers;
 
+#[path = "common/topology_sort.rs"]
+mod topology_sort;
+
 /// Triangles of the generated scene.
 const SCENE_TRIANGLES: u64 = 1_000_000;
 
@@ -80,6 +85,10 @@ fn prepare(name: &str, path: &Path, scratch: &Path) -> Mesh {
     check_soup(path, &soup).unwrap();
     let welded = weld::weld(&soup.positions, &soup.indices);
     let edges = topology::build_edges(&welded.triangles, welded.positions.len());
+    assert!(
+        topology_sort::build_edges(&welded.triangles, welded.positions.len()) == edges,
+        "{name}: the previous topology method gives different edges"
+    );
     let layout = layout::layout(&welded, &edges, DEFAULT_MAX_MULT);
     // The header exactly as a default build writes it, so the write stage
     // serialises the same container as `svpack build`.
@@ -179,6 +188,11 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     let mut g = group(c, "topology", m);
     g.bench_function(format!("ours/{n}"), |b| {
         b.iter(|| topology::build_edges(black_box(&m.welded.triangles), m.welded.positions.len()))
+    });
+    g.bench_function(format!("previous_sort/{n}"), |b| {
+        b.iter(|| {
+            topology_sort::build_edges(black_box(&m.welded.triangles), m.welded.positions.len())
+        })
     });
     g.bench_function(format!("edge_stats/{n}"), |b| {
         b.iter(|| topology::edge_stats(black_box(&m.edges)))
