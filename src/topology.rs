@@ -7,10 +7,11 @@
 //! Edges are produced sorted by (a, b); each edge's opposite vertices are in
 //! triangle order. Both orders are fully determined by the input.
 //!
-//! Method: counting sort of the 3·T half-edges by their smaller endpoint
-//! (vertex ids are dense), in two cache-friendly levels, then a stable sort by
-//! the larger endpoint inside each vertex's bucket, which is tiny for real
-//! meshes (the vertex valence). See [`build_edges`].
+//! Method: every triangle is listed (by id, 4 bytes) under the two corners
+//! that are the smaller endpoint of one of its edges, by a counting sort on
+//! the dense vertex ids; then, vertex by vertex, the listed triangles are
+//! read back and that vertex's edges sorted by larger endpoint, a handful of
+//! records on real meshes (the vertex valence). See [`build_edges`].
 
 /// Edges in compressed-row form.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -67,23 +68,26 @@ impl Edges {
 ///    listing: 2 per triangle, flagged for `mid`). Chunk `c` writes after
 ///    chunks `0..c` in every vertex's list, so lists are in triangle order
 ///    whatever the number of chunks.
-/// 3. **Emit**, in parallel over ranges of [`RANGE`] vertices: a vertex's
-///    listings are read in order and their triangles gathered (prefetched
-///    [`AHEAD`] listings ahead: the triangle table is larger than L2 and the
-///    ids are scattered; without it this pass waited on one miss after
-///    another), its few edge records sorted by larger endpoint, stably
-///    ([`rank_sort_block`]), and opposite vertices and triangles written
-///    straight to their final place: each range's first record is known
-///    from counts kept in pass 1.
-/// 4. **Compact**: pass 3 wrote each range's edges at its first record's
-///    offset (edges never outnumber records); they are moved down in order.
+/// 3. **Emit**, one group of consecutive vertices per thread (groups cut at
+///    multiples of `RANGE` vertices so they hold about equal numbers of
+///    records, counted per range in pass 1): a vertex's listings are read in
+///    order and their triangles gathered (prefetched `AHEAD` listings
+///    ahead: the triangle table is larger than L2 and the ids are
+///    scattered; without it this pass waited on one miss after another), its
+///    few edge records sorted by larger endpoint, stably
+///    (`rank_sort_block`), its opposite vertices and triangles written
+///    straight to their final place, and its edges one after the other from
+///    the group's first record's offset (edges never outnumber records).
+/// 4. **Compact**: each group's edges are moved down after the previous
+///    groups' (one move per group).
 ///
 /// Why not sort the 3·T half-edges themselves (the previous method, a
-/// two-level counting sort of 16-byte records): that writes and reads back
-/// 16 bytes per half-edge, 42 MB of fresh memory on the 871k-triangle
-/// dragon; the listing is 8 bytes per triangle (7 MB) and the gather reads
-/// a triangle table that fits in L3. `topology/ours` on the dragon, one
-/// thread: about 1.5× faster (see the README).
+/// two-level counting sort of 16-byte records, kept as a bench baseline):
+/// that writes and reads back 16 bytes per half-edge, 42 MB of fresh memory
+/// on the 871k-triangle dragon; the listing is 8 bytes per triangle (7 MB)
+/// and the gather reads a triangle table that fits in L3. On the dragon the
+/// CLI's topology stage went from 85.6 to 68.0 ms on one thread (see the
+/// README).
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
