@@ -23,6 +23,11 @@
 //!   (`format::encode_to` into a Vec, `format::write_file` to a temp file),
 //!   and `write/floor_file/*`: writing the same number of ready bytes to a
 //!   temp file and renaming it (the page-cache floor of the write stage);
+//! - `layout+write/whole/*`: `layout::layout` then `format::write_file` (the
+//!   compressed build's path, here uncompressed), against
+//!   `layout+write/streamed/*`: `layout::Plan` and
+//!   `format::write_file_streamed`, which fills the file block by block (the
+//!   uncompressed build's path); both write the same file;
 //! - `evaluate/reference_1t/*`: the CPU evaluator (reference strategy, one
 //!   light, every side bucket and the caps) inside a 1-thread rayon pool;
 //! - `weld+topology+layout/ours/*`: `build::build_soup` from the loaded soup,
@@ -39,7 +44,9 @@
 //! a filter such as `topology/` runs one group.
 
 use criterion::measurement::WallTime;
-use criterion::{BenchmarkGroup, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{
+    BatchSize, BenchmarkGroup, Criterion, Throughput, criterion_group, criterion_main,
+};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use svpack::build::{BuildConfig, build_file, build_soup, check_soup};
@@ -244,6 +251,59 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
         })
     });
     g.finish();
+
+    // The CLI's uncompressed path against filling whole buffers and then
+    // writing them: both from the same welded mesh and edges to a temp file
+    // renamed over the previous output, the same bytes.
+    let mut g = group(c, "layout+write", m);
+    let whole_out = scratch.join(format!("{n}.whole.svpk"));
+    // The previous output is removed outside the timing (as before a fresh
+    // `svpack build`): unlinking 100+ MB of page cache is not either method's.
+    let fresh = |p: &Path| {
+        let _ = std::fs::remove_file(p);
+    };
+    g.bench_function(format!("whole/{n}"), |b| {
+        b.iter_batched(
+            || fresh(&whole_out),
+            |()| {
+                let l = layout::layout(black_box(&m.welded), black_box(&m.edges), DEFAULT_MAX_MULT);
+                let mesh = MeshPayload {
+                    header: m.header.meshes[0].clone(),
+                    caps: &l.caps,
+                    buckets: l.buckets.iter().map(|b| b.data.as_slice()).collect(),
+                };
+                format::write_file(&whole_out, m.header.clone(), &[mesh], false).unwrap()
+            },
+            BatchSize::PerIteration,
+        )
+    });
+    let streamed_out = scratch.join(format!("{n}.streamed.svpk"));
+    g.bench_function(format!("streamed/{n}"), |b| {
+        b.iter_batched(
+            || fresh(&streamed_out),
+            |()| {
+                let plan = layout::Plan::new(
+                    black_box(&m.edges),
+                    m.welded.triangle_count(),
+                    DEFAULT_MAX_MULT,
+                );
+                let records = plan.records(&m.welded, &m.edges);
+                format::write_file_streamed(
+                    &streamed_out,
+                    m.header.clone(),
+                    m.header.meshes[0].clone(),
+                    &records,
+                )
+                .unwrap()
+            },
+            BatchSize::PerIteration,
+        )
+    });
+    g.finish();
+    assert!(
+        std::fs::read(&whole_out).unwrap() == std::fs::read(&streamed_out).unwrap(),
+        "{n}: streamed and whole-buffer files differ"
+    );
 
     let light = [3.0, 2.5, 4.0, 1.0];
     let pool = rayon::ThreadPoolBuilder::new()

@@ -5,7 +5,7 @@ use crate::format::{
     self, BucketHeader, BuildOptions, Encoding, Header, HistogramEntry, InputInfo, MeshHeader,
     MeshPayload, MeshStats, Section,
 };
-use crate::layout::{self, Layout, MAX_MAX_MULT};
+use crate::layout::{self, Layout, MAX_MAX_MULT, Plan};
 use crate::load::{self, Soup};
 use crate::quantize::{self, RecordSpace};
 use crate::topology::{self, Edges};
@@ -58,9 +58,12 @@ pub struct Timings {
     pub weld: f64,
     /// Edges and opposite vertices, and their statistics.
     pub topology: f64,
-    /// Buckets, splitting, sides and caps buffers.
+    /// Buckets and splitting (the counting pass, [`Plan`]); with
+    /// `--compress` also filling the sides and caps buffers.
     pub layout: f64,
-    /// Encoding and writing the file (and compressing it with `--compress`).
+    /// Encoding and writing the file. Without `--compress` this includes
+    /// filling the sides and caps records, which go straight into the file
+    /// (`format::write_file_streamed`); with it, compressing whole buffers.
     pub write: f64,
     /// The whole build.
     pub total: f64,
@@ -152,7 +155,33 @@ pub fn build_soup_timed(
     t: &mut Timings,
     stage: StageCallback<'_>,
 ) -> Built {
-    let ms = |i: Instant| i.elapsed().as_secs_f64() * 1e3;
+    let (welded, edges, es) = weld_and_topology(soup, t, stage);
+    stage("layout");
+    let i = Instant::now();
+    let plan = Plan::new(&edges, welded.triangle_count(), max_mult);
+    let layout = layout::layout_planned(&welded, &edges, &plan);
+    t.layout += ms(i);
+    let stats = mesh_stats(soup, &welded, &es, plan.edge_instances());
+    Built {
+        welded,
+        edges,
+        layout,
+        stats,
+        warnings: soup.stats.warnings.clone(),
+    }
+}
+
+/// Milliseconds since `i`.
+fn ms(i: Instant) -> f64 {
+    i.elapsed().as_secs_f64() * 1e3
+}
+
+/// Weld and topology of a checked soup, timed into `t`.
+fn weld_and_topology(
+    soup: &Soup,
+    t: &mut Timings,
+    stage: StageCallback<'_>,
+) -> (Welded, Edges, topology::EdgeStats) {
     stage("weld");
     let i = Instant::now();
     let welded = weld::weld(&soup.positions, &soup.indices);
@@ -162,11 +191,17 @@ pub fn build_soup_timed(
     let edges = topology::build_edges(&welded.triangles, welded.positions.len());
     let es = topology::edge_stats(&edges);
     t.topology += ms(i);
-    stage("layout");
-    let i = Instant::now();
-    let layout = layout::layout(&welded, &edges, max_mult);
-    t.layout += ms(i);
-    let stats = MeshStats {
+    (welded, edges, es)
+}
+
+/// The header's statistics of one mesh.
+fn mesh_stats(
+    soup: &Soup,
+    welded: &Welded,
+    es: &topology::EdgeStats,
+    edge_instances: u64,
+) -> MeshStats {
+    MeshStats {
         primitives: soup.stats.primitives,
         input_triangles: soup.triangle_count() as u64,
         input_vertices: soup.positions.len() as u64,
@@ -176,7 +211,7 @@ pub fn build_soup_timed(
         skipped_lines: soup.stats.skipped_lines,
         triangles: welded.triangle_count() as u64,
         edges: es.edges,
-        edge_instances: layout.edge_instances(),
+        edge_instances,
         open_edges: es.open_edges,
         non_manifold_edges: es.non_manifold_edges,
         max_fan: es.max_fan,
@@ -185,13 +220,6 @@ pub fn build_soup_timed(
             .iter()
             .map(|&(opposites, edges)| HistogramEntry { opposites, edges })
             .collect(),
-    };
-    Built {
-        welded,
-        edges,
-        layout,
-        stats,
-        warnings: soup.stats.warnings.clone(),
     }
 }
 
@@ -237,7 +265,6 @@ pub fn build_file_with(
         )));
     }
     let start = Instant::now();
-    let ms = |i: Instant| i.elapsed().as_secs_f64() * 1e3;
     let mut timings = Timings::default();
     stage("load");
     let data = load::read_file(input)?;
@@ -262,55 +289,54 @@ pub fn build_file_with(
         soup.positions = quantize::to_record_space(&soup.positions, &space, cfg.positions);
     }
     timings.weld = ms(quantise_start);
-    let built = build_soup_timed(&soup, cfg.max_mult, &mut timings, stage);
-    if built.stats.triangles == 0 {
+    let (welded, edges, es) = weld_and_topology(&soup, &mut timings, stage);
+    stage("layout");
+    let i = Instant::now();
+    let plan = Plan::new(&edges, welded.triangle_count(), cfg.max_mult);
+    // A compressed file is one zstd stream, written in order from whole
+    // buffers; an uncompressed one is filled block by block at its offsets.
+    let layout = cfg
+        .compress
+        .then(|| layout::layout_planned(&welded, &edges, &plan));
+    timings.layout += ms(i);
+    let stats = mesh_stats(&soup, &welded, &es, plan.edge_instances());
+    if stats.triangles == 0 {
         return Err(Error::input(
             input,
             format!(
                 "no triangles to build ({} input triangles, {} degenerate, {} point and {} line primitives skipped)",
-                built.stats.input_triangles,
-                built.stats.degenerate_triangles,
-                built.stats.skipped_points,
-                built.stats.skipped_lines
+                stats.input_triangles,
+                stats.degenerate_triangles,
+                stats.skipped_points,
+                stats.skipped_lines
             ),
         ));
     }
-    let (bmin, bmax) = world_bounds.unwrap_or_else(|| bounds(&built.welded.positions));
+    let (bmin, bmax) = world_bounds.unwrap_or_else(|| bounds(&welded.positions));
     let name = input
         .file_stem()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let mesh = MeshPayload {
-        header: MeshHeader {
-            name,
-            bounds_min: bmin,
-            bounds_max: bmax,
-            position_offset: space.offset,
-            position_scale: space.scale,
-            stats: built.stats.clone(),
-            caps: Section {
+    let mesh_header = MeshHeader {
+        name,
+        bounds_min: bmin,
+        bounds_max: bmax,
+        position_offset: space.offset,
+        position_scale: space.scale,
+        stats,
+        caps: Section {
+            offset: 0,
+            length: 0,
+            count: 0,
+        },
+        buckets: plan
+            .buckets()
+            .map(|(k, instances)| BucketHeader {
+                k,
+                instances,
                 offset: 0,
                 length: 0,
-                count: 0,
-            },
-            buckets: built
-                .layout
-                .buckets
-                .iter()
-                .map(|b| BucketHeader {
-                    k: b.k,
-                    instances: b.instances,
-                    offset: 0,
-                    length: 0,
-                })
-                .collect(),
-        },
-        caps: &built.layout.caps,
-        buckets: built
-            .layout
-            .buckets
-            .iter()
-            .map(|b| b.data.as_slice())
+            })
             .collect(),
     };
     let header = Header {
@@ -338,7 +364,20 @@ pub fn build_file_with(
     };
     stage("write");
     let write_start = Instant::now();
-    let (header, file_bytes) = format::write_file(output, header, &[mesh], cfg.compress)?;
+    let (header, file_bytes) = match &layout {
+        Some(layout) => {
+            let mesh = MeshPayload {
+                header: mesh_header,
+                caps: &layout.caps,
+                buckets: layout.buckets.iter().map(|b| b.data.as_slice()).collect(),
+            };
+            format::write_file(output, header, &[mesh], true)?
+        }
+        None => {
+            let records = plan.records(&welded, &edges);
+            format::write_file_streamed(output, header, mesh_header, &records)?
+        }
+    };
     timings.write = ms(write_start);
     timings.total = ms(start);
     Ok(BuildOutput {
@@ -346,7 +385,7 @@ pub fn build_file_with(
         file_bytes,
         elapsed: start.elapsed(),
         timings,
-        warnings: built.warnings,
+        warnings: soup.stats.warnings,
     })
 }
 

@@ -304,9 +304,34 @@ pub struct MeshPayload<'a> {
     pub buckets: Vec<&'a [f32]>,
 }
 
-/// Writes record floats (vec4 after vec4) in `enc`, then zeros up to the
-/// next multiple of [`ALIGN`], through a small buffer. Unorm16 stores `xyz`
-/// as the codes of their record-space values and `w` as a saturated integer.
+/// Encodes record floats (vec4 after vec4, starting at a vec4 boundary)
+/// into `buf`, which holds at least `floats.len() · bytes per float`;
+/// returns the bytes written. Unorm16 stores `xyz` as the codes of their
+/// record-space values and `w` as a saturated integer.
+fn encode_floats(floats: &[f32], enc: Encoding, buf: &mut [u8]) -> usize {
+    match enc {
+        Encoding::F32 => {
+            for (i, v) in floats.iter().enumerate() {
+                buf[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+            }
+            floats.len() * 4
+        }
+        Encoding::Unorm16 => {
+            for (i, v) in floats.iter().enumerate() {
+                let c = if i % 4 == 3 {
+                    v.clamp(0.0, 65535.0) as u16
+                } else {
+                    f32_to_unorm16(*v)
+                };
+                buf[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
+            }
+            floats.len() * 2
+        }
+    }
+}
+
+/// Writes record floats in `enc` ([`encode_floats`]), then zeros up to the
+/// next multiple of [`ALIGN`], through a small buffer.
 fn write_records<W: Write>(out: &mut W, floats: &[f32], enc: Encoding) -> std::io::Result<()> {
     // f32 on a little-endian machine: the memory already is the file's bytes.
     if enc == Encoding::F32 && cfg!(target_endian = "little") {
@@ -318,25 +343,7 @@ fn write_records<W: Write>(out: &mut W, floats: &[f32], enc: Encoding) -> std::i
     let mut buf = [0u8; 1 << 16];
     let mut written = 0u64;
     for chunk in floats.chunks(buf.len() / 4) {
-        let n = match enc {
-            Encoding::F32 => {
-                for (i, v) in chunk.iter().enumerate() {
-                    buf[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
-                }
-                chunk.len() * 4
-            }
-            Encoding::Unorm16 => {
-                for (i, v) in chunk.iter().enumerate() {
-                    let c = if i % 4 == 3 {
-                        v.clamp(0.0, 65535.0) as u16
-                    } else {
-                        f32_to_unorm16(*v)
-                    };
-                    buf[2 * i..2 * i + 2].copy_from_slice(&c.to_le_bytes());
-                }
-                chunk.len() * 2
-            }
-        };
+        let n = encode_floats(chunk, enc, &mut buf);
         out.write_all(&buf[..n])?;
         written += n as u64;
     }
@@ -384,6 +391,45 @@ fn crc_records_serial(hasher: &mut crc32fast::Hasher, floats: &[f32], enc: Encod
     write_records(&mut H(hasher), floats, enc).expect("hashing cannot fail");
 }
 
+/// The header's bytes, which must not change length once sections are
+/// placed: fixed-width integers make the length independent of the offsets
+/// and the checksum.
+fn encode_header(header: &Header) -> Result<Vec<u8>> {
+    bincode::serde::encode_to_vec(header, bincode_config())
+        .map_err(|e| Error::Other(format!("cannot encode header: {e}")))
+}
+
+/// Fills every section's offset, length and count and the payload's offset
+/// and length, from each mesh's section float counts (`floats[m]`: the caps,
+/// then the buckets in header order). Returns the encoded header's length.
+fn place_sections(header: &mut Header, floats: &[Vec<u64>]) -> Result<usize> {
+    let vec4 = header
+        .options
+        .encoding()
+        .map_err(Error::Other)?
+        .vec4_bytes();
+    // One encoding with zeros tells where the payload starts.
+    let probe_len = encode_header(header)?.len();
+    let payload_offset = align_up((PREAMBLE_LEN + probe_len) as u64);
+    let mut offset = payload_offset;
+    for (mh, f) in header.meshes.iter_mut().zip(floats) {
+        mh.caps = Section {
+            offset,
+            length: f[0] / 4 * vec4,
+            count: f[0] / 12,
+        };
+        offset = align_up(offset + mh.caps.length);
+        for (bh, &n) in mh.buckets.iter_mut().zip(&f[1..]) {
+            bh.offset = offset;
+            bh.length = n / 4 * vec4;
+            offset = align_up(offset + bh.length);
+        }
+    }
+    header.payload_offset = payload_offset;
+    header.payload_len = offset - payload_offset;
+    Ok(probe_len)
+}
+
 /// Fills section offsets, lengths and the payload checksum into a header.
 /// Returns the encoded header bytes and the final header.
 pub fn finalize_header(
@@ -392,38 +438,37 @@ pub fn finalize_header(
 ) -> Result<(Vec<u8>, Header)> {
     header.meshes = meshes.iter().map(|m| m.header.clone()).collect();
     let enc = header.options.encoding().map_err(Error::Other)?;
-    let vec4 = enc.vec4_bytes();
-    let encode = |h: &Header| {
-        bincode::serde::encode_to_vec(h, bincode_config())
-            .map_err(|e| Error::Other(format!("cannot encode header: {e}")))
-    };
-    // Fixed-width integers: the header length does not depend on the offset
-    // values, so one encoding with zeros tells where the payload starts.
-    let probe_len = encode(&header)?.len();
-    let payload_offset = align_up((PREAMBLE_LEN + probe_len) as u64);
-    let mut offset = payload_offset;
+    let floats: Vec<Vec<u64>> = meshes
+        .iter()
+        .map(|m| {
+            std::iter::once(m.caps.len() as u64)
+                .chain(m.buckets.iter().map(|b| b.len() as u64))
+                .collect()
+        })
+        .collect();
+    let probe_len = place_sections(&mut header, &floats)?;
     let mut crc = crc32fast::Hasher::new();
-    for (mh, m) in header.meshes.iter_mut().zip(meshes) {
-        mh.caps = Section {
-            offset,
-            length: m.caps.len() as u64 / 4 * vec4,
-            count: m.caps.len() as u64 / 12,
-        };
-        offset = align_up(offset + mh.caps.length);
+    for m in meshes {
         crc_records(&mut crc, m.caps, enc);
-        for (bh, data) in mh.buckets.iter_mut().zip(&m.buckets) {
-            bh.offset = offset;
-            bh.length = data.len() as u64 / 4 * vec4;
-            offset = align_up(offset + bh.length);
+        for data in &m.buckets {
             crc_records(&mut crc, data, enc);
         }
     }
-    header.payload_offset = payload_offset;
-    header.payload_len = offset - payload_offset;
     header.payload_crc32 = crc.finalize();
-    let bytes = encode(&header)?;
+    let bytes = encode_header(&header)?;
     debug_assert_eq!(bytes.len(), probe_len);
     Ok((bytes, header))
+}
+
+/// The bytes before the header: magic, version, header length and CRC.
+fn preamble(hbytes: &[u8]) -> [u8; PREAMBLE_LEN] {
+    let mut pre = [0u8; PREAMBLE_LEN];
+    pre[0..8].copy_from_slice(&MAGIC);
+    pre[8..10].copy_from_slice(&VERSION_MAJOR.to_le_bytes());
+    pre[10..12].copy_from_slice(&VERSION_MINOR.to_le_bytes());
+    pre[12..16].copy_from_slice(&(hbytes.len() as u32).to_le_bytes());
+    pre[16..20].copy_from_slice(&crc32fast::hash(hbytes).to_le_bytes());
+    pre
 }
 
 /// Encodes the whole file to `out` (uncompressed container bytes).
@@ -434,13 +479,7 @@ pub fn encode_to<W: Write>(
 ) -> Result<Header> {
     let (hbytes, header) = finalize_header(header, meshes)?;
     let io = |e: std::io::Error| Error::Other(format!("write failed: {e}"));
-    let mut pre = [0u8; PREAMBLE_LEN];
-    pre[0..8].copy_from_slice(&MAGIC);
-    pre[8..10].copy_from_slice(&VERSION_MAJOR.to_le_bytes());
-    pre[10..12].copy_from_slice(&VERSION_MINOR.to_le_bytes());
-    pre[12..16].copy_from_slice(&(hbytes.len() as u32).to_le_bytes());
-    pre[16..20].copy_from_slice(&crc32fast::hash(&hbytes).to_le_bytes());
-    out.write_all(&pre).map_err(io)?;
+    out.write_all(&preamble(&hbytes)).map_err(io)?;
     out.write_all(&hbytes).map_err(io)?;
     let pad = header.payload_offset as usize - PREAMBLE_LEN - hbytes.len();
     out.write_all(&[0u8; 16][..pad]).map_err(io)?;
@@ -459,6 +498,20 @@ pub fn container_len(header: &Header) -> u64 {
     header.payload_offset + header.payload_len
 }
 
+/// A temporary file beside `path`, renamed onto it once complete, so that
+/// no reader ever sees a partial output.
+fn temp_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    tempfile::Builder::new()
+        .prefix(".svpack-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|e| Error::io(path, e))
+}
+
 /// Writes the file to `path` atomically (temp file in the same directory,
 /// then rename), optionally zstd-wrapped. Returns the final header and the
 /// number of bytes on disk.
@@ -468,15 +521,7 @@ pub fn write_file(
     meshes: &[MeshPayload<'_>],
     compress: bool,
 ) -> Result<(Header, u64)> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".svpack-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| Error::io(path, e))?;
+    let tmp = temp_beside(path)?;
     let file = tmp.as_file().try_clone().map_err(|e| Error::io(path, e))?;
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
     let header = if compress {
@@ -503,6 +548,154 @@ pub fn write_file(
         .metadata()
         .map_err(|e| Error::io(path, e))?
         .len();
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok((header, size))
+}
+
+/// One mesh's payload produced piece by piece, for [`write_file_streamed`].
+///
+/// The sections are the caps, then the side buckets in the mesh header's
+/// order. The payload is cut into independent units; in every section, unit
+/// `u`'s floats follow unit `u − 1`'s, so each unit knows where its pieces go
+/// before any is written.
+pub trait PayloadSource: Sync {
+    /// Number of units.
+    fn units(&self) -> usize;
+    /// Floats (in record space) that `unit` writes into `section`.
+    fn floats(&self, unit: usize, section: usize) -> usize;
+    /// Writes `unit`'s floats: `outs[s]` is its piece of section `s`,
+    /// [`PayloadSource::floats`]`(unit, s)` long.
+    fn fill(&self, unit: usize, outs: &mut [&mut [f32]]);
+}
+
+/// Writes `buf` at `offset` of `file`.
+fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::FileExt::write_all_at(file, buf, offset)
+    }
+    #[cfg(windows)]
+    {
+        let (mut buf, mut offset) = (buf, offset);
+        while !buf.is_empty() {
+            match std::os::windows::fs::FileExt::seek_write(file, buf, offset)? {
+                0 => return Err(std::io::ErrorKind::WriteZero.into()),
+                n => {
+                    buf = &buf[n..];
+                    offset += n as u64;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Writes a one-mesh uncompressed file to `path` atomically, filling the
+/// payload unit by unit straight into the file instead of from buffers in
+/// memory: the same bytes as [`write_file`] of the whole buffers.
+///
+/// Why: the buffers are the largest allocation of a build (144 bytes per
+/// triangle), and filling fresh memory costs page faults and zeroing before
+/// the bytes are even copied to the file. Here each thread fills one unit at
+/// a time into a buffer it reuses, which stays in cache, hashes it and
+/// writes it at its precomputed offset (`pwrite`); the units' CRCs are
+/// combined in file order, so the file is the same whatever the thread count.
+/// The header, which holds the CRC, is written last, at the start.
+pub fn write_file_streamed(
+    path: &Path,
+    mut header: Header,
+    mesh: MeshHeader,
+    source: &dyn PayloadSource,
+) -> Result<(Header, u64)> {
+    use rayon::prelude::*;
+    let enc = header.options.encoding().map_err(Error::Other)?;
+    let per_float = enc.vec4_bytes() / 4;
+    let sections = 1 + mesh.buckets.len();
+    let units = source.units();
+    let mut floats = vec![0u64; sections];
+    for u in 0..units {
+        for (s, f) in floats.iter_mut().enumerate() {
+            *f += source.floats(u, s) as u64;
+        }
+    }
+    header.meshes = vec![mesh];
+    let probe_len = place_sections(&mut header, std::slice::from_ref(&floats))?;
+    let m = &header.meshes[0];
+    // Where each unit's piece of each section starts in the file.
+    let mut next: Vec<u64> = std::iter::once(m.caps.offset)
+        .chain(m.buckets.iter().map(|b| b.offset))
+        .collect();
+    let mut starts = vec![0u64; units * sections];
+    for u in 0..units {
+        for s in 0..sections {
+            starts[u * sections + s] = next[s];
+            next[s] += source.floats(u, s) as u64 * per_float;
+        }
+    }
+
+    let tmp = temp_beside(path)?;
+    let file = tmp.as_file();
+    let size = container_len(&header);
+    file.set_len(size).map_err(|e| Error::io(path, e))?;
+    let crcs: Vec<Vec<crc32fast::Hasher>> = (0..units)
+        .into_par_iter()
+        .map_init(
+            || (Vec::<f32>::new(), Vec::<u8>::new()),
+            |(fbuf, bbuf), u| {
+                let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
+                fbuf.clear();
+                fbuf.resize(lens.iter().sum(), 0.0);
+                let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
+                let mut rest = &mut fbuf[..];
+                for &n in &lens {
+                    let (mine, tail) = rest.split_at_mut(n);
+                    outs.push(mine);
+                    rest = tail;
+                }
+                source.fill(u, &mut outs);
+                let mut hashes = Vec::with_capacity(sections);
+                let mut at = 0;
+                for (s, &n) in lens.iter().enumerate() {
+                    let piece = &fbuf[at..at + n];
+                    at += n;
+                    let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little") {
+                        bytemuck::cast_slice(piece)
+                    } else {
+                        bbuf.resize(n * per_float as usize, 0);
+                        let len = encode_floats(piece, enc, bbuf);
+                        &bbuf[..len]
+                    };
+                    let mut h = crc32fast::Hasher::new();
+                    h.update(bytes);
+                    if !bytes.is_empty() {
+                        write_at(file, bytes, starts[u * sections + s])
+                            .map_err(|e| Error::io(path, e))?;
+                    }
+                    hashes.push(h);
+                }
+                Ok(hashes)
+            },
+        )
+        .collect::<Result<_>>()?;
+    // The payload's CRC: every section's pieces in unit order, then the
+    // section's zero padding (as `write_records` writes it).
+    let mut crc = crc32fast::Hasher::new();
+    for (s, &f) in floats.iter().enumerate() {
+        for unit in &crcs {
+            crc.combine(&unit[s]);
+        }
+        let bytes = f * per_float;
+        crc.update(&[0u8; 16][..(align_up(bytes) - bytes) as usize]);
+    }
+    header.payload_crc32 = crc.finalize();
+    let hbytes = encode_header(&header)?;
+    if hbytes.len() != probe_len {
+        return Err(Error::Other(
+            "header length changed after placing sections".into(),
+        ));
+    }
+    write_at(file, &preamble(&hbytes), 0).map_err(|e| Error::io(path, e))?;
+    write_at(file, &hbytes, PREAMBLE_LEN as u64).map_err(|e| Error::io(path, e))?;
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok((header, size))
 }

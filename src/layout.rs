@@ -15,6 +15,7 @@
 //! A and B. Stencil counting is additive, so drawing the chunks separately
 //! adds up to the edge's multiplicity.
 
+use crate::format::PayloadSource;
 use crate::hint::prefetch;
 use crate::topology::Edges;
 use crate::weld::Welded;
@@ -95,110 +96,253 @@ const BLOCK: usize = 1 << 14;
 /// `layout/ours` in benches/stages.rs).
 const AHEAD: usize = 16;
 
+/// The layout's counting pass: how many instances each bucket gets, in
+/// total and per fill block, so that every block knows where its records go
+/// before any is written. [`layout`] fills buffers in memory from a plan;
+/// `format::write_file_streamed` fills the file block by block from one,
+/// without the buffers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    max_mult: u32,
+    triangles: usize,
+    /// Instances per bucket `k` (index `k`, `0..=K`; bucket 0 is always empty).
+    counts: Vec<u64>,
+    /// `counts`, per block of [`BLOCK`] edges.
+    block_counts: Vec<Vec<u64>>,
+}
+
+impl Plan {
+    /// Counts the instances of every bucket, per block of edges.
+    /// `max_mult` must be in `1..=MAX_MAX_MULT`.
+    pub fn new(edges: &Edges, triangles: usize, max_mult: u32) -> Plan {
+        use rayon::prelude::*;
+        assert!(
+            (1..=MAX_MAX_MULT).contains(&max_mult),
+            "max_mult out of range"
+        );
+        let k_max = max_mult as usize;
+        let blocks = edges.len().div_ceil(BLOCK);
+        let block_counts: Vec<Vec<u64>> = (0..blocks)
+            .into_par_iter()
+            .map(|blk| {
+                let mut counts = vec![0u64; k_max + 1];
+                for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+                    let (full, rem) = split(edges.fan(e) as u32, max_mult);
+                    counts[k_max] += full as u64;
+                    if rem > 0 {
+                        counts[rem as usize] += 1;
+                    }
+                }
+                counts
+            })
+            .collect();
+        let mut counts = vec![0u64; k_max + 1];
+        for c in &block_counts {
+            for k in 0..=k_max {
+                counts[k] += c[k];
+            }
+        }
+        Plan {
+            max_mult,
+            triangles,
+            counts,
+            block_counts,
+        }
+    }
+
+    /// K of this plan.
+    pub fn max_mult(&self) -> u32 {
+        self.max_mult
+    }
+
+    /// The records of this plan for `welded` and `edges` (those it was made
+    /// from), to be written by `format::write_file_streamed`.
+    pub fn records<'a>(&'a self, welded: &'a Welded, edges: &'a Edges) -> Records<'a> {
+        Records {
+            plan: self,
+            welded,
+            edges,
+            ks: self.buckets().map(|(k, _)| k).collect(),
+        }
+    }
+
+    /// `(k, instances)` of the non-empty buckets, in increasing k.
+    pub fn buckets(&self) -> impl Iterator<Item = (u32, u64)> + '_ {
+        self.counts
+            .iter()
+            .enumerate()
+            .filter(|&(_, &n)| n > 0)
+            .map(|(k, &n)| (k as u32, n))
+    }
+
+    /// Total side instances.
+    pub fn edge_instances(&self) -> u64 {
+        self.counts.iter().sum()
+    }
+
+    /// Number of side fill blocks ([`BLOCK`] edges each).
+    pub fn side_blocks(&self) -> usize {
+        self.block_counts.len()
+    }
+
+    /// Number of caps fill blocks ([`BLOCK`] triangles each).
+    pub fn cap_blocks(&self) -> usize {
+        self.triangles.div_ceil(BLOCK)
+    }
+
+    /// Floats that side block `blk` writes into bucket `k`.
+    pub fn side_block_floats(&self, blk: usize, k: u32) -> usize {
+        let k = k as usize;
+        self.block_counts[blk][k] as usize * (2 + k) * 4
+    }
+
+    /// Floats that caps block `blk` writes.
+    pub fn cap_block_floats(&self, blk: usize) -> usize {
+        let end = ((blk + 1) * BLOCK).min(self.triangles);
+        (end - blk * BLOCK) * 12
+    }
+
+    /// Writes side block `blk`'s records: `outs[k]` receives bucket k's,
+    /// exactly [`Plan::side_block_floats`]`(blk, k)` floats (`outs` has
+    /// K + 1 entries, entry 0 unused).
+    pub fn fill_sides(&self, welded: &Welded, edges: &Edges, blk: usize, outs: &mut [&mut [f32]]) {
+        let k_max = self.max_mult as usize;
+        let pos = &welded.positions;
+        let mut at = [0usize; MAX_MAX_MULT as usize + 1];
+        for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+            if let (Some(&b), Some(&s)) = (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD)) {
+                prefetch(&pos[b as usize]);
+                for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
+                    prefetch(&pos[o as usize]);
+                }
+            }
+            let a = pos[edges.a[e] as usize];
+            let b = pos[edges.b[e] as usize];
+            let opp = edges.opposites(e);
+            let n = opp.len() as f32;
+            for chunk in opp.chunks(k_max) {
+                let k = chunk.len();
+                let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
+                at[k] += (2 + k) * 4;
+                out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
+                out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
+                for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
+                    let o = pos[o as usize];
+                    slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
+                }
+            }
+        }
+    }
+
+    /// Writes caps block `blk`'s records into `out`
+    /// ([`Plan::cap_block_floats`]`(blk)` floats).
+    pub fn fill_caps(&self, welded: &Welded, blk: usize, out: &mut [f32]) {
+        let pos = &welded.positions;
+        let end = ((blk + 1) * BLOCK).min(self.triangles);
+        let tris = &welded.triangles[3 * blk * BLOCK..3 * end];
+        for (i, (rec, c)) in out
+            .chunks_exact_mut(12)
+            .zip(tris.chunks_exact(3))
+            .enumerate()
+        {
+            for &v in tris
+                .get(3 * (i + AHEAD)..3 * (i + AHEAD + 1))
+                .unwrap_or(&[])
+            {
+                prefetch(&pos[v as usize]);
+            }
+            for (slot, &v) in rec.chunks_exact_mut(4).zip(c) {
+                let p = pos[v as usize];
+                slot.copy_from_slice(&[p[0], p[1], p[2], 1.0]);
+            }
+        }
+    }
+}
+
+/// A plan's records as a [`PayloadSource`] ([`Plan::records`]): the caps
+/// blocks, then the side blocks, filled as `format::write_file_streamed`
+/// asks; sections are the caps, then the non-empty buckets in increasing k.
+pub struct Records<'a> {
+    plan: &'a Plan,
+    welded: &'a Welded,
+    edges: &'a Edges,
+    /// Bucket k of each side section (section `s` is bucket `ks[s - 1]`).
+    ks: Vec<u32>,
+}
+
+impl PayloadSource for Records<'_> {
+    fn units(&self) -> usize {
+        self.plan.cap_blocks() + self.plan.side_blocks()
+    }
+
+    fn floats(&self, unit: usize, section: usize) -> usize {
+        let caps = self.plan.cap_blocks();
+        match (unit < caps, section) {
+            (true, 0) => self.plan.cap_block_floats(unit),
+            (false, s) if s > 0 => self.plan.side_block_floats(unit - caps, self.ks[s - 1]),
+            _ => 0,
+        }
+    }
+
+    fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
+        let caps = self.plan.cap_blocks();
+        if unit < caps {
+            self.plan.fill_caps(self.welded, unit, outs[0]);
+            return;
+        }
+        let mut by_k: Vec<&mut [f32]> = (0..=self.plan.max_mult)
+            .map(|_| Default::default())
+            .collect();
+        for (out, &k) in outs[1..].iter_mut().zip(&self.ks) {
+            by_k[k as usize] = std::mem::take(out);
+        }
+        self.plan
+            .fill_sides(self.welded, self.edges, unit - caps, &mut by_k);
+    }
+}
+
 /// Builds the sides and caps buffers. `max_mult` must be in `1..=MAX_MAX_MULT`.
 ///
 /// Records go to their bucket in edge order. The fill is parallel but the
 /// output is not thread-dependent: edges are cut into fixed blocks, each
-/// block's record count per bucket is known beforehand, so every block
-/// writes its own precomputed range of every bucket.
+/// block's record count per bucket is known beforehand ([`Plan`]), so every
+/// block writes its own precomputed range of every bucket.
 pub fn layout(welded: &Welded, edges: &Edges, max_mult: u32) -> Layout {
-    use rayon::prelude::*;
-    assert!(
-        (1..=MAX_MAX_MULT).contains(&max_mult),
-        "max_mult out of range"
-    );
-    let k_max = max_mult as usize;
-    let pos = &welded.positions;
+    layout_planned(
+        welded,
+        edges,
+        &Plan::new(edges, welded.triangle_count(), max_mult),
+    )
+}
 
-    // Pass 1: instances per bucket, per block of edges.
-    let blocks = edges.len().div_ceil(BLOCK);
-    let block_counts: Vec<Vec<u64>> = (0..blocks)
-        .into_par_iter()
-        .map(|blk| {
-            let mut counts = vec![0u64; k_max + 1];
-            for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
-                let (full, rem) = split(edges.fan(e) as u32, max_mult);
-                counts[k_max] += full as u64;
-                if rem > 0 {
-                    counts[rem as usize] += 1;
-                }
-            }
-            counts
-        })
-        .collect();
-    let mut counts = vec![0u64; k_max + 1];
-    for c in &block_counts {
-        for k in 0..=k_max {
-            counts[k] += c[k];
-        }
-    }
+/// [`layout`] from a plan made for these edges and triangles.
+pub fn layout_planned(welded: &Welded, edges: &Edges, plan: &Plan) -> Layout {
+    use rayon::prelude::*;
+    let k_max = plan.max_mult as usize;
+    let counts = &plan.counts;
     let mut data: Vec<Vec<f32>> = (0..=k_max)
         .map(|k| vec![0.0; counts[k] as usize * (2 + k) * 4])
         .collect();
 
-    // Pass 2: cut every bucket into the blocks' ranges, then fill in parallel.
-    let mut per_block: Vec<Vec<&mut [f32]>> = (0..blocks).map(|_| Vec::new()).collect();
+    // Cut every bucket into the blocks' ranges, then fill in parallel.
+    let mut per_block: Vec<Vec<&mut [f32]>> = (0..plan.side_blocks()).map(|_| Vec::new()).collect();
     for (k, bucket) in data.iter_mut().enumerate() {
         let mut rest: &mut [f32] = bucket;
-        for (blk, c) in block_counts.iter().enumerate() {
-            let (mine, tail) = rest.split_at_mut(c[k] as usize * (2 + k) * 4);
-            per_block[blk].push(mine);
+        for (blk, outs) in per_block.iter_mut().enumerate() {
+            let (mine, tail) = rest.split_at_mut(plan.side_block_floats(blk, k as u32));
+            outs.push(mine);
             rest = tail;
         }
     }
     per_block
         .into_par_iter()
         .enumerate()
-        .for_each(|(blk, mut outs)| {
-            let mut at = vec![0usize; k_max + 1];
-            for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
-                if let (Some(&b), Some(&s)) =
-                    (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD))
-                {
-                    prefetch(&pos[b as usize]);
-                    for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
-                        prefetch(&pos[o as usize]);
-                    }
-                }
-                let a = pos[edges.a[e] as usize];
-                let b = pos[edges.b[e] as usize];
-                let opp = edges.opposites(e);
-                let n = opp.len() as f32;
-                for chunk in opp.chunks(k_max) {
-                    let k = chunk.len();
-                    let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
-                    at[k] += (2 + k) * 4;
-                    out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
-                    out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
-                    for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
-                        let o = pos[o as usize];
-                        slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
-                    }
-                }
-            }
-        });
+        .for_each(|(blk, mut outs)| plan.fill_sides(welded, edges, blk, &mut outs));
 
-    let mut caps = vec![0.0f32; welded.triangles.len() * 4];
+    let mut caps = vec![0.0f32; plan.triangles * 12];
     caps.par_chunks_mut(12 * BLOCK)
-        .zip(welded.triangles.par_chunks(3 * BLOCK))
-        .for_each(|(out, tris)| {
-            for (i, (rec, c)) in out
-                .chunks_exact_mut(12)
-                .zip(tris.chunks_exact(3))
-                .enumerate()
-            {
-                for &v in tris
-                    .get(3 * (i + AHEAD)..3 * (i + AHEAD + 1))
-                    .unwrap_or(&[])
-                {
-                    prefetch(&pos[v as usize]);
-                }
-                for (slot, &v) in rec.chunks_exact_mut(4).zip(c) {
-                    let p = pos[v as usize];
-                    slot.copy_from_slice(&[p[0], p[1], p[2], 1.0]);
-                }
-            }
-        });
+        .enumerate()
+        .for_each(|(blk, out)| plan.fill_caps(welded, blk, out));
 
     let buckets = data
         .into_iter()

@@ -1,0 +1,124 @@
+//! Uncompressed builds fill the file block by block at precomputed offsets
+//! (`format::write_file_streamed`); compressed builds write whole in-memory
+//! buffers in order (`format::write_file`). Both must carry the same payload
+//! bytes and the same header apart from the compression flag, whatever the
+//! thread count, K or position encoding.
+
+mod common;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use svpack::build::{BuildConfig, build_file};
+use svpack::format::{self, Encoding};
+
+/// A grid with fins on every 5th cell and fans of 1–17 extra triangles on
+/// every 97th edge: several side and caps blocks, every bucket of every K.
+fn fan_grid(dir: &Path) -> PathBuf {
+    let n = 150;
+    let mut s = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let _ = writeln!(s, "v {} {} {}", i, j, ((i * 3 + j * 5) % 7) as f32 * 0.1);
+        }
+    }
+    let id = |i: usize, j: usize| j * (n + 1) + i + 1;
+    let mut apex = (n + 1) * (n + 1);
+    let mut cell = 0;
+    for j in 0..n {
+        for i in 0..n {
+            let _ = writeln!(s, "f {} {} {}", id(i, j), id(i + 1, j), id(i + 1, j + 1));
+            let _ = writeln!(s, "f {} {} {}", id(i, j), id(i + 1, j + 1), id(i, j + 1));
+            cell += 1;
+            let fins = if cell % 97 == 0 {
+                1 + cell / 97 % 17
+            } else {
+                usize::from(cell % 5 == 0)
+            };
+            for f in 0..fins {
+                apex += 1;
+                let _ = writeln!(s, "v {} {} {}", i as f32 + 0.5, j as f32 - 0.25, 1 + f);
+                let _ = writeln!(s, "f {} {} {}", id(i, j), id(i + 1, j), apex);
+            }
+        }
+    }
+    let p = dir.join("fan_grid.obj");
+    std::fs::write(&p, s).unwrap();
+    p
+}
+
+/// Builds `input` both ways in a pool of `threads` threads and compares.
+fn check(input: &Path, dir: &Path, cfg: BuildConfig, threads: usize) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let streamed = dir.join("streamed.svpk");
+    let whole = dir.join("whole.svpk");
+    pool.install(|| {
+        build_file(input, &streamed, &cfg).unwrap();
+        build_file(
+            input,
+            &whole,
+            &BuildConfig {
+                compress: true,
+                ..cfg
+            },
+        )
+        .unwrap();
+    });
+    // read_file checks both CRCs and every section's placement.
+    let s = format::read_file(&streamed).unwrap();
+    let w = format::read_file(&whole).unwrap();
+    assert!(!s.compressed && w.compressed);
+    let what = format!("{} with {cfg:?}, {threads} threads", input.display());
+    let mut wh = w.header.clone();
+    wh.options.compress = false;
+    assert_eq!(s.header, wh, "{what}: headers differ");
+    let from = s.header.payload_offset as usize;
+    assert_eq!(s.bytes.len(), w.bytes.len(), "{what}: lengths differ");
+    assert!(
+        s.bytes[from..] == w.bytes[from..],
+        "{what}: payloads differ"
+    );
+}
+
+#[test]
+fn streamed_files_equal_whole_buffer_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut inputs: Vec<PathBuf> = common::write_fixtures(tmp.path())
+        .into_iter()
+        .map(|(_, p)| p)
+        .collect();
+    inputs.push(fan_grid(tmp.path()));
+    for input in &inputs {
+        for positions in [Encoding::F32, Encoding::Unorm16] {
+            for max_mult in [1, 2, 5, 13] {
+                for threads in [1, 3] {
+                    let cfg = BuildConfig {
+                        max_mult,
+                        compress: false,
+                        positions,
+                    };
+                    check(input, tmp.path(), cfg, threads);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn streamed_files_equal_whole_buffer_files_on_shared_models() {
+    let Some(shared) = common::shared_meshes() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    for input in common::shared_models(&shared).iter().take(6) {
+        for positions in [Encoding::F32, Encoding::Unorm16] {
+            let cfg = BuildConfig {
+                positions,
+                ..BuildConfig::default()
+            };
+            check(input, tmp.path(), cfg, 2);
+        }
+    }
+}
