@@ -33,7 +33,10 @@
 //! - `weld+topology+layout/ours/*`: `build::build_soup` from the loaded soup,
 //!   against `weld+topology+layout/meshopt_adjacency/*`: meshoptimizer's
 //!   adjacency from the same unwelded soup (it does its own position
-//!   matching), i.e. "soup in, adjacency out" for both.
+//!   matching), i.e. "soup in, adjacency out" for both; and
+//!   `weld+topology+layout/ours_buckets/*`: weld, topology and the bucket
+//!   counts (`layout::Plan`) without filling any buffer, which is all an
+//!   uncompressed build does before writing.
 //!
 //! Inputs: dragon_res4, armadillo and 2CylinderEngine from ../shared/meshes,
 //! the full Stanford dragon when `benches/fetch_dragon.sh` has fetched it,
@@ -339,6 +342,18 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     let mut g = group(c, "weld+topology+layout", m);
     g.bench_function(format!("ours/{n}"), |b| {
         b.iter(|| build_soup(black_box(&m.soup), DEFAULT_MAX_MULT))
+    });
+    // What an uncompressed build does before its write stage (which fills
+    // the records straight into the file): weld, topology with its
+    // statistics, and the bucket counts.
+    g.bench_function(format!("ours_buckets/{n}"), |b| {
+        b.iter(|| {
+            let w = weld::weld(black_box(&m.soup.positions), black_box(&m.soup.indices));
+            let e = topology::build_edges(&w.triangles, w.positions.len());
+            let stats = topology::edge_stats(&e);
+            let plan = layout::Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
+            (w, e, stats, plan)
+        })
     });
     g.bench_function(format!("meshopt_adjacency/{n}"), |b| {
         b.iter(|| meshopt_adjacency(black_box(&m.soup.positions), black_box(&m.soup.indices)))

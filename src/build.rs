@@ -182,16 +182,32 @@ fn weld_and_topology(
     t: &mut Timings,
     stage: StageCallback<'_>,
 ) -> (Welded, Edges, topology::EdgeStats) {
+    let welded = timed_weld(soup, t, stage);
+    let (edges, es) = timed_topology(&welded, t, stage);
+    (welded, edges, es)
+}
+
+/// Welds a checked soup, timed into `t`.
+fn timed_weld(soup: &Soup, t: &mut Timings, stage: StageCallback<'_>) -> Welded {
     stage("weld");
     let i = Instant::now();
     let welded = weld::weld(&soup.positions, &soup.indices);
     t.weld += ms(i);
+    welded
+}
+
+/// Edges and their statistics, timed into `t`.
+fn timed_topology(
+    welded: &Welded,
+    t: &mut Timings,
+    stage: StageCallback<'_>,
+) -> (Edges, topology::EdgeStats) {
     stage("topology");
     let i = Instant::now();
     let edges = topology::build_edges(&welded.triangles, welded.positions.len());
     let es = topology::edge_stats(&edges);
     t.topology += ms(i);
-    (welded, edges, es)
+    (edges, es)
 }
 
 /// The header's statistics of one mesh.
@@ -215,12 +231,16 @@ fn mesh_stats(
         open_edges: es.open_edges,
         non_manifold_edges: es.non_manifold_edges,
         max_fan: es.max_fan,
-        histogram: es
-            .histogram
-            .iter()
-            .map(|&(opposites, edges)| HistogramEntry { opposites, edges })
-            .collect(),
+        histogram: histogram(es),
     }
+}
+
+/// The header's form of the opposite-count histogram.
+fn histogram(es: &topology::EdgeStats) -> Vec<HistogramEntry> {
+    es.histogram
+        .iter()
+        .map(|&(opposites, edges)| HistogramEntry { opposites, edges })
+        .collect()
 }
 
 /// Axis-aligned bounds of `positions` (zeros when empty).
@@ -289,7 +309,16 @@ pub fn build_file_with(
         soup.positions = quantize::to_record_space(&soup.positions, &space, cfg.positions);
     }
     timings.weld = ms(quantise_start);
-    let (welded, edges, es) = weld_and_topology(&soup, &mut timings, stage);
+    let mut welded = timed_weld(&soup, &mut timings, stage);
+    let stats_before = mesh_stats(&soup, &welded, &Default::default(), 0);
+    // What the rest of the build does not read is freed before topology
+    // allocates, which then reuses those pages: the soup (the welded mesh
+    // replaces it) and the welded triangles' sources (for `lint` only).
+    // Faulting in pages the process has never touched is the slow part of
+    // a fresh buffer, especially in a VM (README, "Fifth round").
+    (soup.positions, soup.indices) = (Vec::new(), Vec::new());
+    welded.source_triangle = Vec::new();
+    let (edges, es) = timed_topology(&welded, &mut timings, stage);
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, welded.triangle_count(), cfg.max_mult);
@@ -299,7 +328,15 @@ pub fn build_file_with(
         .compress
         .then(|| layout::layout_planned(&welded, &edges, &plan));
     timings.layout += ms(i);
-    let stats = mesh_stats(&soup, &welded, &es, plan.edge_instances());
+    let stats = MeshStats {
+        edges: es.edges,
+        edge_instances: plan.edge_instances(),
+        open_edges: es.open_edges,
+        non_manifold_edges: es.non_manifold_edges,
+        max_fan: es.max_fan,
+        histogram: histogram(&es),
+        ..stats_before
+    };
     if stats.triangles == 0 {
         return Err(Error::input(
             input,
