@@ -23,6 +23,7 @@
 //!   (`format::encode_to` into a Vec, `format::write_file` to a temp file),
 //!   and `write/floor_file/*`: writing the same number of ready bytes to a
 //!   temp file and renaming it (the page-cache floor of the write stage);
+//!   the file benchmarks remove their previous output outside the timing;
 //! - `layout+write/whole/*`: `layout::layout` then `format::write_file` (the
 //!   compressed build's path, here uncompressed), against
 //!   `layout+write/streamed/*`: `layout::Plan` and
@@ -238,20 +239,36 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
             buf.len()
         })
     });
+    // Every file benchmark removes its previous output outside the timing
+    // (as before a fresh `svpack build`): unlinking 100+ MB of page cache is
+    // not the writer's cost.
+    let fresh = |p: &Path| {
+        let _ = std::fs::remove_file(p);
+    };
     let out = scratch.join(format!("{n}.write.svpk"));
     g.bench_function(format!("file/{n}"), |b| {
-        b.iter(|| format::write_file(&out, m.header.clone(), &[payload(m)], false).unwrap())
+        b.iter_batched(
+            || fresh(&out),
+            |()| format::write_file(&out, m.header.clone(), &[payload(m)], false).unwrap(),
+            BatchSize::PerIteration,
+        )
     });
     // Floor: the same number of bytes, already encoded, written the same way
     // (temp file in the same directory, renamed over the previous output).
-    let bytes = vec![1u8; buf.len()];
+    // (Sized from the header, not from `write/memory`'s buffer, which is
+    // empty when a filter skips that benchmark.)
+    let bytes = vec![1u8; format::container_len(&m.header) as usize];
     let floor_out = scratch.join(format!("{n}.floor.bin"));
     g.bench_function(format!("floor_file/{n}"), |b| {
-        b.iter(|| {
-            let tmp = tempfile::NamedTempFile::new_in(scratch).unwrap();
-            std::io::Write::write_all(&mut tmp.as_file(), black_box(&bytes)).unwrap();
-            tmp.persist(&floor_out).unwrap();
-        })
+        b.iter_batched(
+            || fresh(&floor_out),
+            |()| {
+                let tmp = tempfile::NamedTempFile::new_in(scratch).unwrap();
+                std::io::Write::write_all(&mut tmp.as_file(), black_box(&bytes)).unwrap();
+                tmp.persist(&floor_out).unwrap();
+            },
+            BatchSize::PerIteration,
+        )
     });
     g.finish();
 
@@ -260,11 +277,6 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     // renamed over the previous output, the same bytes.
     let mut g = group(c, "layout+write", m);
     let whole_out = scratch.join(format!("{n}.whole.svpk"));
-    // The previous output is removed outside the timing (as before a fresh
-    // `svpack build`): unlinking 100+ MB of page cache is not either method's.
-    let fresh = |p: &Path| {
-        let _ = std::fs::remove_file(p);
-    };
     g.bench_function(format!("whole/{n}"), |b| {
         b.iter_batched(
             || fresh(&whole_out),
