@@ -310,7 +310,8 @@ pub fn build_file_with(
     }
     timings.weld = ms(quantise_start);
     let mut welded = timed_weld(&soup, &mut timings, stage);
-    let stats_before = mesh_stats(&soup, &welded, &Default::default(), 0);
+    // The soup's and the weld's counts; the edge fields are set after topology.
+    let counts = mesh_stats(&soup, &welded, &Default::default(), 0);
     // What the rest of the build does not read is freed before topology
     // allocates, which then reuses those pages: the soup (the welded mesh
     // replaces it) and the welded triangles' sources (for `lint` only).
@@ -335,7 +336,7 @@ pub fn build_file_with(
         non_manifold_edges: es.non_manifold_edges,
         max_fan: es.max_fan,
         histogram: histogram(&es),
-        ..stats_before
+        ..counts
     };
     if stats.triangles == 0 {
         return Err(Error::input(

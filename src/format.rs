@@ -588,6 +588,14 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
         }
         Ok(())
     }
+    #[cfg(not(any(unix, windows)))]
+    {
+        let _ = (file, buf, offset);
+        Err(std::io::Error::new(
+            std::io::ErrorKind::Unsupported,
+            "positioned writes are not available on this platform",
+        ))
+    }
 }
 
 /// Writes a one-mesh uncompressed file to `path` atomically, filling the
