@@ -220,7 +220,7 @@ fn mesh_stats(
     MeshStats {
         primitives: soup.stats.primitives,
         input_triangles: soup.triangle_count() as u64,
-        input_vertices: soup.positions.len() as u64,
+        input_vertices: soup.input_vertices,
         welded_vertices: welded.positions.len() as u64,
         degenerate_triangles: welded.degenerate,
         skipped_points: soup.stats.skipped_points,

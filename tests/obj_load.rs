@@ -992,3 +992,71 @@ fn large_files_and_big_polygons_load() {
         }
     }
 }
+
+/// Long models are handed to tobj in blocks of faces (the pre-scan repeats
+/// the model's `o`/`g` statement), which must not show: the same parts,
+/// triangles, counters and `input_vertices` as the whole-text path, which
+/// never cuts (a file with CR-only line ends takes that path).
+#[test]
+fn models_cut_into_blocks_load_like_whole_models() {
+    use std::fmt::Write as _;
+    let dir = tempfile::tempdir().unwrap();
+    // A 300 × 400 grid: 120,701 vertices, every interior one used by six
+    // triangles that are often in different blocks.
+    let (nx, ny) = (300usize, 400usize);
+    let mut text = String::from("# grid\n");
+    for j in 0..=ny {
+        for i in 0..=nx {
+            let _ = writeln!(text, "v {i} {j} {}", (i * j) % 7);
+        }
+    }
+    let id = |i: usize, j: usize| j * (nx + 1) + i + 1;
+    let mut faces = 0;
+    for j in 0..ny {
+        // 70,200 faces before any name (tobj's "unnamed_object"), then a
+        // group whose name has a space and a trailing comment, then an object.
+        if j == 117 {
+            text.push_str("g part one # the middle\n");
+        }
+        if j == ny - 1 {
+            text.push_str("o third\n");
+        }
+        for i in 0..nx {
+            let _ = writeln!(text, "f {} {} {}", id(i, j), id(i + 1, j), id(i + 1, j + 1));
+            let _ = writeln!(text, "f {} {} {}", id(i, j), id(i + 1, j + 1), id(i, j + 1));
+            faces += 2;
+        }
+    }
+    let (_, blocked) = load_str(dir.path(), "lf.obj", &text);
+    let blocked = ok(blocked);
+    let (_, whole) = load_str(dir.path(), "cr.obj", &text.replace('\n', "\r"));
+    let whole = ok(whole);
+
+    let parts = |s: &Soup| -> Vec<(String, u32, u32)> {
+        s.parts
+            .iter()
+            .map(|p| (p.name.clone(), p.first_triangle, p.triangle_count))
+            .collect()
+    };
+    let expected = vec![
+        ("object \"unnamed_object\"".to_string(), 0, 70_200),
+        (
+            "object \"part one # the middle\"".to_string(),
+            70_200,
+            169_200,
+        ),
+        ("object \"third\"".to_string(), 239_400, 600),
+    ];
+    assert_eq!(parts(&blocked), expected);
+    assert_eq!(parts(&whole), expected);
+    assert_eq!(blocked.triangle_count(), faces);
+    for t in 0..faces {
+        assert_eq!(tri(&blocked, t), tri(&whole, t), "triangle {t}");
+    }
+    assert_eq!(blocked.stats.primitives, 3);
+    assert_eq!(whole.stats.primitives, 3);
+    assert_eq!(blocked.input_vertices, ((nx + 1) * (ny + 1)) as u64);
+    assert_eq!(whole.input_vertices, blocked.input_vertices);
+    // The blocks did happen: vertices shared by two blocks came out twice.
+    assert!(blocked.positions.len() > whole.positions.len());
+}

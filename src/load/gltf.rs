@@ -96,6 +96,7 @@ pub fn load_gltf(path: &Path, data: Vec<u8>) -> Result<Soup> {
         build_soup(&ctx, &instances, &mut soup, &mut warnings).map(|()| soup)
     });
     let mut soup = built?;
+    soup.input_vertices = soup.positions.len() as u64;
     if soup.indices.is_empty() {
         warnings.push("no triangles found in the scene".to_string());
     }

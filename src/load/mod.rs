@@ -49,6 +49,12 @@ pub struct Soup {
     pub indices: Vec<u32>,
     /// Named triangle ranges, in order, covering all triangles.
     pub parts: Vec<Part>,
+    /// Vertex positions the input declares (the header's `input_vertices`):
+    /// OBJ `v` statements; glTF POSITION elements of the triangle
+    /// primitives, once per instance (as many as `positions`). For OBJ,
+    /// `positions` may hold more: the loader exports a vertex once per block
+    /// of faces that uses it (welding merges the copies).
+    pub input_vertices: u64,
     /// Loader counters.
     pub stats: LoadStats,
     /// Total bytes read from disk (main file plus external buffers).

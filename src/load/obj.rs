@@ -24,7 +24,13 @@
 //!    twice; anything else is redone on an owned copy of the whole text
 //!    (`parse_owned`), with the same result.
 //! 3. **Parse** with `tobj::load_obj_buf` (untriangulated, one index per
-//!    attribute). A few recoverable problems are repaired in place and the
+//!    attribute). On the piece-by-piece path, a model longer than
+//!    `MODEL_BLOCK_FACES` faces is handed to tobj in blocks: the pre-scan
+//!    repeats the model's `o`/`g` statement at a piece boundary, so tobj
+//!    exports the block and reuses its face buffer (104 bytes per face,
+//!    otherwise the largest buffer of a build); the blocks have the same
+//!    name and become one part again. `input_vertices` is the number of
+//!    `v` statements either way. A few recoverable problems are repaired in place and the
 //!    parse is retried (see `repair_vertex_lines`); any other failure is turned
 //!    into a message naming the offending line (`diagnose`).
 //! 4. **Triangulate** (`Triangulator`): triangles pass through; every face
@@ -172,6 +178,7 @@ fn finish(parsed: Parsed) -> Result<Soup, String> {
         mut warnings,
     } = parsed;
     let mut soup = build_soup(models, &mut warnings)?;
+    soup.input_vertices = scan.vertices;
     let stats = &mut soup.stats;
     stats.skipped_points += scan.point_refs;
     stats.skipped_lines += scan.line_statements;
@@ -476,6 +483,8 @@ enum Kind {
     Line,
     Point,
     Comment,
+    /// `o` or `g`: a new object or group (tobj starts a new model).
+    Group,
     Other,
 }
 
@@ -493,6 +502,15 @@ struct Prescanner {
     scan: Prescan,
     /// Kind of the statement whose line ended in a continuation.
     continued: Option<Kind>,
+    /// `scan.faces` when the current tobj model began (at the last `o` or
+    /// `g`, or the last [`PrescanReader`] block boundary).
+    model_faces: u64,
+    /// The last `o` or `g` statement, as tobj will read it (`None` before
+    /// the first: tobj then names the model "unnamed_object").
+    group_line: Option<Vec<u8>>,
+    /// An `o` or `g` statement was continued on the next line: it cannot be
+    /// repeated verbatim, so models are not cut into blocks.
+    group_continued: bool,
 }
 
 impl Prescanner {
@@ -545,9 +563,16 @@ impl Prescanner {
                 _ => classify_and_blank(line, scan),
             },
         };
+        if kind == Kind::Group && first_part {
+            self.model_faces = scan.faces;
+            self.group_line = Some(line.to_vec());
+        }
         if kind != Kind::Comment
             && let Some(backslash) = continuation(line)
         {
+            if kind == Kind::Group {
+                self.group_continued = true;
+            }
             line[backslash..].fill(b' ');
             if e < piece.len() {
                 piece[e] = b' ';
@@ -617,6 +642,15 @@ fn plain_ascii(bytes: &[u8]) -> bool {
 /// enough to stay in the L2 cache until tobj has read it.
 const PIECE: usize = 64 << 10;
 
+/// Faces after which [`PrescanReader`] ends tobj's current model at the next
+/// piece boundary. Why: tobj keeps every face of a model until the model
+/// ends, 104 bytes each (four 24-byte index triples and a tag), so a
+/// one-object mesh of 871k triangles held 90 MB of faces: the largest
+/// buffer of the whole build, and every page of it fresh. In blocks of this
+/// many faces the buffer stays under 7 MB and is reused (tobj clears it).
+/// Vertices used by two blocks are exported by both; welding merges them.
+const MODEL_BLOCK_FACES: u64 = 1 << 16;
+
 /// Gives tobj the pre-scanned text without modifying (or copying all of) the
 /// original: each piece of whole lines is copied into a buffer, checked
 /// (no NUL byte, valid UTF-8, as `normalize_encoding` requires) and
@@ -658,8 +692,22 @@ impl<'a> PrescanReader<'a> {
             return Err(std::io::Error::other("text needs decoding"));
         }
         self.piece.clear();
+        let sc = &mut self.scanner;
+        if sc.scan.faces - sc.model_faces >= MODEL_BLOCK_FACES && !sc.group_continued {
+            // Repeat the current model's `o`/`g` statement: tobj ends the
+            // model there, exports it and reuses its face buffer. The
+            // models have the same name, and `build_soup` merges them
+            // back into one part.
+            match &sc.group_line {
+                Some(line) => self.piece.extend_from_slice(line),
+                None => self.piece.extend_from_slice(b"o unnamed_object"),
+            }
+            self.piece.push(b'\n');
+            sc.model_faces = sc.scan.faces;
+        }
+        let injected = self.piece.len();
         self.piece.extend_from_slice(piece);
-        self.scanner.run(&mut self.piece, self.offset);
+        self.scanner.run(&mut self.piece[injected..], self.offset);
         self.offset += end;
         self.rest = rest;
         self.read = 0;
@@ -721,6 +769,7 @@ fn classify_and_blank(line: &mut [u8], scan: &mut Prescan) -> Kind {
             scan.point_statements += 1;
             (Kind::Point, true)
         }
+        b"o" | b"g" => (Kind::Group, false),
         b"vt" | b"vn" | b"vp" | b"usemtl" | b"mtllib" => (Kind::Other, true),
         [b'#', ..] => (Kind::Comment, false),
         _ => (Kind::Other, false),
