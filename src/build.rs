@@ -183,7 +183,7 @@ fn weld_and_topology(
     stage: StageCallback<'_>,
 ) -> (Welded, Edges, topology::EdgeStats) {
     let welded = timed_weld(soup, t, stage);
-    let (edges, es) = timed_topology(&welded, t, stage);
+    let (edges, es) = timed_topology(&welded, false, t, stage);
     (welded, edges, es)
 }
 
@@ -196,15 +196,22 @@ fn timed_weld(soup: &Soup, t: &mut Timings, stage: StageCallback<'_>) -> Welded 
     welded
 }
 
-/// Edges and their statistics, timed into `t`.
+/// Edges and their statistics, timed into `t`; without the opposite
+/// vertices' triangles (`Edges::opp_tri`) when `opposites_only`.
 fn timed_topology(
     welded: &Welded,
+    opposites_only: bool,
     t: &mut Timings,
     stage: StageCallback<'_>,
 ) -> (Edges, topology::EdgeStats) {
     stage("topology");
     let i = Instant::now();
-    let edges = topology::build_edges(&welded.triangles, welded.positions.len());
+    let (tris, n) = (&welded.triangles, welded.positions.len());
+    let edges = if opposites_only {
+        topology::build_edges_opposites_only(tris, n)
+    } else {
+        topology::build_edges(tris, n)
+    };
     let es = topology::edge_stats(&edges);
     t.topology += ms(i);
     (edges, es)
@@ -319,7 +326,8 @@ pub fn build_file_with(
     // a fresh buffer, especially in a VM (README, "Fifth round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
     welded.source_triangle = Vec::new();
-    let (edges, es) = timed_topology(&welded, &mut timings, stage);
+    // Nor does it read the opposite vertices' triangles.
+    let (edges, es) = timed_topology(&welded, true, &mut timings, stage);
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, welded.triangle_count(), cfg.max_mult);
