@@ -161,7 +161,13 @@ pub fn build_soup_timed(
     let plan = Plan::new(&edges, welded.triangle_count(), max_mult);
     let layout = layout::layout_planned(&welded, &edges, &plan);
     t.layout += ms(i);
-    let stats = mesh_stats(soup, &welded, &es, plan.edge_instances());
+    let stats = mesh_stats(
+        soup,
+        soup.triangle_count(),
+        &welded,
+        &es,
+        plan.edge_instances(),
+    );
     Built {
         welded,
         edges,
@@ -217,16 +223,18 @@ fn timed_topology(
     (edges, es)
 }
 
-/// The header's statistics of one mesh.
+/// The header's statistics of one mesh (`input_triangles`: the soup's
+/// triangle count, passed because a build frees the soup's indices early).
 fn mesh_stats(
     soup: &Soup,
+    input_triangles: usize,
     welded: &Welded,
     es: &topology::EdgeStats,
     edge_instances: u64,
 ) -> MeshStats {
     MeshStats {
         primitives: soup.stats.primitives,
-        input_triangles: soup.triangle_count() as u64,
+        input_triangles: input_triangles as u64,
         input_vertices: soup.input_vertices,
         welded_vertices: welded.positions.len() as u64,
         degenerate_triangles: welded.degenerate,
@@ -238,16 +246,12 @@ fn mesh_stats(
         open_edges: es.open_edges,
         non_manifold_edges: es.non_manifold_edges,
         max_fan: es.max_fan,
-        histogram: histogram(es),
+        histogram: es
+            .histogram
+            .iter()
+            .map(|&(opposites, edges)| HistogramEntry { opposites, edges })
+            .collect(),
     }
-}
-
-/// The header's form of the opposite-count histogram.
-fn histogram(es: &topology::EdgeStats) -> Vec<HistogramEntry> {
-    es.histogram
-        .iter()
-        .map(|&(opposites, edges)| HistogramEntry { opposites, edges })
-        .collect()
 }
 
 /// Axis-aligned bounds of `positions` (zeros when empty).
@@ -317,8 +321,8 @@ pub fn build_file_with(
     }
     timings.weld = ms(quantise_start);
     let mut welded = timed_weld(&soup, &mut timings, stage);
-    // The soup's and the weld's counts; the edge fields are set after topology.
-    let counts = mesh_stats(&soup, &welded, &Default::default(), 0);
+    // (The one count of the soup the header needs that freeing it loses.)
+    let input_triangles = soup.triangle_count();
     // What the rest of the build does not read is freed before topology
     // allocates, which then reuses those pages: the soup (the welded mesh
     // replaces it) and the welded triangles' sources (for `lint` only).
@@ -337,15 +341,7 @@ pub fn build_file_with(
         .compress
         .then(|| layout::layout_planned(&welded, &edges, &plan));
     timings.layout += ms(i);
-    let stats = MeshStats {
-        edges: es.edges,
-        edge_instances: plan.edge_instances(),
-        open_edges: es.open_edges,
-        non_manifold_edges: es.non_manifold_edges,
-        max_fan: es.max_fan,
-        histogram: histogram(&es),
-        ..counts
-    };
+    let stats = mesh_stats(&soup, input_triangles, &welded, &es, plan.edge_instances());
     if stats.triangles == 0 {
         return Err(Error::input(
             input,
