@@ -150,11 +150,6 @@ impl Plan {
         }
     }
 
-    /// K of this plan.
-    pub fn max_mult(&self) -> u32 {
-        self.max_mult
-    }
-
     /// The records of this plan for `welded` and `edges` (those it was made
     /// from), to be written by `format::write_file_streamed`.
     pub fn records<'a>(&'a self, welded: &'a Welded, edges: &'a Edges) -> Records<'a> {
