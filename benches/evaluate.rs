@@ -13,6 +13,11 @@
 //! on the same machine state (the results are bit for bit equal; the
 //! library's tests check that).
 //!
+//! Every timed loop runs inside the one-thread pool (`pool.install` around
+//! `b.iter`): starting the pool's thread from outside for each iteration
+//! costs a sleep and a wake-up, tens of microseconds in this VM, which was
+//! 15% of an iteration on the bunny.
+//!
 //! `cargo bench --bench evaluate -- --warm-up-time 1 --measurement-time 3`;
 //! criterion reports time per element: per side record for `sides/*` and
 //! `caps+sides/*`, per triangle for `caps/*`.
@@ -92,8 +97,8 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
         g.throughput(Throughput::Elements(records as u64));
         g.bench_function(format!("sides/{label}"), |b| {
             let mut outs: Vec<Vec<i8>> = d.buckets.iter().map(|x| vec![0; x.records()]).collect();
-            b.iter(|| {
-                pool.install(|| {
+            pool.install(|| {
+                b.iter(|| {
                     for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
                         sides(strategy, bk.k, &bk.data, light, o);
                     }
@@ -103,18 +108,25 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
         g.throughput(Throughput::Elements(d.caps.len() as u64));
         g.bench_function(format!("caps/{label}"), |b| {
             let mut o = vec![0i8; d.caps.len()];
-            b.iter(|| pool.install(|| caps(strategy, &d.caps_data, light, &mut o)))
+            pool.install(|| b.iter(|| caps(strategy, &d.caps_data, light, &mut o)))
         });
     }
     // The caps from sorted corner ids (what `verify` uses for the reference
     // when the file's position table allows it), per triangle: reads against
     // caps/reference above.
+    // `_no_avx512`: the same with the AVX-512 kernels turned off (AVX2 for
+    // the caps, the plain loop for the sides): the previous kernels as
+    // peers in the same run.
     if let Some(ix) = &d.indexed {
         g.throughput(Throughput::Elements(ix.len() as u64));
-        g.bench_function("caps/reference_indexed", |b| {
-            let mut o = vec![0i8; ix.len()];
-            b.iter(|| pool.install(|| ix.cap_signs(light, &mut o)))
-        });
+        for (label, off) in [("", false), ("_no_avx512", true)] {
+            g.bench_function(format!("caps/reference_indexed{label}"), |b| {
+                let mut o = vec![0i8; ix.len()];
+                svpack::evaluate_simd::disable_avx512(off);
+                pool.install(|| b.iter(|| ix.cap_signs(light, &mut o)));
+                svpack::evaluate_simd::disable_avx512(false);
+            });
+        }
     }
     // The evaluator `verify` uses: each triangle's sign once (caps), then
     // every side record as a signed sum of its triangles' signs; per light,
@@ -164,8 +176,21 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             std::hint::black_box(acc.wrapping_add(read_slots()))
         })
     });
-    g.bench_function("caps+sides/reference_shared", |b| {
-        b.iter(|| pool.install(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
+    // What `verify` does per light: one set of output buffers reused
+    // across lights (`evaluate_into`); `_fresh` allocates them per light
+    // (`evaluate`), which on this machine means first-touch page faults.
+    for (label, off) in [("", false), ("_no_avx512", true)] {
+        g.bench_function(format!("caps+sides/reference_shared{label}"), |b| {
+            let mut ev = svpack::verify::Evaluation::default();
+            svpack::evaluate_simd::disable_avx512(off);
+            pool.install(|| {
+                b.iter(|| svpack::verify::evaluate_into(&d, light, Strategy::Reference, &mut ev))
+            });
+            svpack::evaluate_simd::disable_avx512(false);
+        });
+    }
+    g.bench_function("caps+sides/reference_shared_fresh", |b| {
+        pool.install(|| b.iter(|| svpack::verify::evaluate(&d, light, Strategy::Reference)))
     });
     // The same computation with the caps from the records (the shared
     // evaluator before the ids), the peer of the line above, and through the
@@ -184,8 +209,8 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
         ),
     ] {
         g.bench_function(format!("caps+sides/{label}"), |b| {
-            b.iter(|| {
-                pool.install(|| {
+            pool.install(|| {
+                b.iter(|| {
                     let mut caps = vec![0i8; d.caps.len()];
                     caps_fn(Strategy::Reference, &d.caps_data, light, &mut caps);
                     let sides: Vec<Vec<i8>> = d
@@ -203,19 +228,34 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
         });
     }
     let caps = svpack::verify::evaluate(&d, light, Strategy::Reference).caps;
-    for (label, shared) in [
-        ("reference_shared", side_multiplicities_shared as SharedFn),
-        ("reference_shared_scalar", side_multiplicities_shared_scalar),
+    for (label, shared, off) in [
+        (
+            "reference_shared",
+            side_multiplicities_shared as SharedFn,
+            false,
+        ),
+        (
+            "reference_shared_no_avx512",
+            side_multiplicities_shared,
+            true,
+        ),
+        (
+            "reference_shared_scalar",
+            side_multiplicities_shared_scalar,
+            false,
+        ),
     ] {
         g.bench_function(format!("sides_given_caps/{label}"), |b| {
             let mut outs: Vec<Vec<i8>> = d.buckets.iter().map(|x| vec![0; x.records()]).collect();
-            b.iter(|| {
-                pool.install(|| {
+            svpack::evaluate_simd::disable_avx512(off);
+            pool.install(|| {
+                b.iter(|| {
                     for (bk, o) in d.buckets.iter().zip(outs.iter_mut()) {
                         shared_bucket(shared, bk, &caps, light, o);
                     }
                 })
-            })
+            });
+            svpack::evaluate_simd::disable_avx512(false);
         });
     }
     g.finish();

@@ -24,7 +24,9 @@ use crate::format::{Encoding, SvpkFile};
 use crate::multiplicity::{Light, lex_less};
 use crate::quantize::{self, RecordSpace};
 use crate::shadow::{ShadowIndex, check_shadow, choose_samples, occluders};
-use crate::verify::{Decoded, VerifyLight, check_closedness, choose_lights, decode, evaluate};
+use crate::verify::{
+    Decoded, Evaluation, VerifyLight, check_closedness, choose_lights, decode, evaluate_into,
+};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -275,11 +277,11 @@ fn strategy_errors(p: &Prepared, index: &ShadowIndex, samples: &[[f32; 3]]) -> V
             let per_light: Vec<(u64, u64, u64, u64)> = p
                 .lights
                 .par_iter()
-                .map(|&light| {
-                    let ev = evaluate(&p.d, light, s);
-                    let c = check_closedness(&p.d, light, &ev);
+                .map_init(Evaluation::default, |ev, &light| {
+                    evaluate_into(&p.d, light, s, ev);
+                    let c = check_closedness(&p.d, light, ev);
                     let dis = disagreeing_triangles(&p.d, light, s);
-                    let sh = check_shadow(&p.d, index, light, &ev, samples);
+                    let sh = check_shadow(&p.d, index, light, ev, samples);
                     (c.violations, dis, sh.samples, sh.mismatches)
                 })
                 .collect();
@@ -433,8 +435,10 @@ fn time_strategy(
         std::hint::black_box((&sides, &caps));
         let t = Instant::now();
         if strategy != Strategy::Kim {
+            let mut ev = Evaluation::default();
             for &l in lights {
-                std::hint::black_box(evaluate(d, l, strategy));
+                evaluate_into(d, l, strategy, &mut ev);
+                std::hint::black_box(&ev);
             }
         }
         let tsh = t.elapsed().as_secs_f64();

@@ -22,7 +22,7 @@
 //! breaks the equivalence, and [`IndexedCaps::new`] declines it; callers
 //! then use the record kernel.
 
-use crate::evaluate_simd::{Corner, LANES, sorted_sign_nb};
+use crate::evaluate_simd::{Corner, LANES, sorted_sign_nb, sorted_sign_off_corners};
 use crate::multiplicity::{Light, lex_less};
 use rayon::prelude::*;
 
@@ -41,6 +41,9 @@ pub struct IndexedCaps {
     sorted: Vec<[u32; 3]>,
     /// Per triangle, whether that sort was an odd permutation.
     odd: Vec<bool>,
+    /// Ids into `points` in the contract's lexicographic order: finds
+    /// whether a point light sits on a corner with one binary search.
+    lex: Vec<u32>,
 }
 
 /// The three-comparator network of the contract (format-spec §3) on ids:
@@ -91,11 +94,44 @@ impl IndexedCaps {
             }
             *id = *r;
         }
+        // `positions` is in lexicographic order, so the used ones, renamed,
+        // are too.
+        let lex = rename.into_iter().filter(|&r| r != u32::MAX).collect();
         Some(IndexedCaps {
             points,
             sorted,
             odd,
+            lex,
         })
+    }
+
+    /// Whether `l` is a point light equal (`==` on each coordinate, as the
+    /// contract's test) to one of the triangles' corners. When it is not,
+    /// no triangle needs the light-on-corner test.
+    ///
+    /// The table is strictly increasing and NaN-free (checked by `new`),
+    /// and the lexicographic comparison below treats `−0.0` and `+0.0` as
+    /// `==` does, so the binary search finds an equal point whenever there
+    /// is one. A light with a NaN equals no corner; the search may then
+    /// answer either way, and `true` only costs the test.
+    pub(crate) fn light_on_a_corner(&self, l: Light) -> bool {
+        use std::cmp::Ordering;
+        l[3] == 1.0
+            && self
+                .lex
+                .binary_search_by(|&i| {
+                    let p = self.points[i as usize];
+                    for a in 0..3 {
+                        if p[a] < l[a] {
+                            return Ordering::Less;
+                        }
+                        if p[a] > l[a] {
+                            return Ordering::Greater;
+                        }
+                    }
+                    Ordering::Equal
+                })
+                .is_ok()
     }
 
     /// Number of triangles.
@@ -114,14 +150,31 @@ impl IndexedCaps {
     /// records. `out.len()` must equal [`IndexedCaps::len`].
     pub fn cap_signs(&self, l: Light, out: &mut [i8]) {
         assert_eq!(out.len(), self.sorted.len(), "caps size mismatch");
+        let on_corner = self.light_on_a_corner(l);
         out.par_chunks_mut(CHUNK)
             .zip(self.sorted.par_chunks(CHUNK))
             .zip(self.odd.par_chunks(CHUNK))
-            .for_each(|((o, t), odd)| self.signs(t, odd, l, o));
+            .for_each(|((o, t), odd)| self.signs(t, odd, l, on_corner, o));
     }
 
-    /// One chunk, through the AVX2 version when the CPU has it.
-    fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, out: &mut [i8]) {
+    /// One chunk, through the AVX-512 version when the CPU has it and the
+    /// table's float offsets fit the gathers' 32-bit indices (with the
+    /// light-on-corner test only when `on_corner`), else AVX2, else the
+    /// plain loop.
+    fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, on_corner: bool, out: &mut [i8]) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::evaluate_simd::have_avx512() && self.points.len() <= MAX_GATHER_POINTS {
+            // SAFETY: the CPU has AVX-512F (checked just above); every id is
+            // below points.len() (checked by `new`), whose float offsets fit
+            // an i32 (checked just above).
+            return unsafe {
+                if on_corner {
+                    signs_avx512::<true>(&self.points, sorted, odd, l, out)
+                } else {
+                    signs_avx512::<false>(&self.points, sorted, odd, l, out)
+                }
+            };
+        }
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::have_avx2() {
             // SAFETY: the CPU has AVX2 (checked just above).
@@ -193,6 +246,101 @@ fn signs_avx2(points: &[[f32; 4]], sorted: &[[u32; 3]], odd: &[bool], l: Light, 
     signs_impl::<true>(points, sorted, odd, l, out)
 }
 
+/// Most points whose float offsets (`4 · id + 2`) fit the AVX-512 gathers'
+/// signed 32-bit indices.
+const MAX_GATHER_POINTS: usize = (i32::MAX as usize - 2) / 4;
+
+/// Triangles per AVX-512 block: one 512-bit vector of f32 lanes.
+#[cfg(target_arch = "x86_64")]
+const WIDE: usize = 16;
+
+/// [`signs_impl`] in blocks of [`WIDE`] triangles with AVX-512: the corner
+/// ids de-interleaved with two-source permutes; each corner's `x, y` pairs
+/// fetched with two 64-bit gathers (8 lanes each) and split with two
+/// permutes, its `z` with one 32-bit gather (32 loads per corner instead of
+/// the 48 of three 32-bit gathers; the AVX2 version needs 24 row loads and
+/// 21 shuffles per 8 triangles, and the shuffles, which have one port,
+/// were its bottleneck); then the same per-lane `sorted_sign_nb` as every
+/// other version, which LLVM vectorises 16 wide, or with `TEST` false
+/// `sorted_sign_off_corners` (the caller knows the light is on no corner).
+/// Gathers and permutes move bits and compute nothing, so the lanes hold
+/// exactly the floats of the other versions. The tail goes through
+/// [`signs_impl`].
+///
+/// # Safety
+/// The CPU must have AVX-512F, every id in `sorted` must be below
+/// `points.len()`, and `points.len()` at most [`MAX_GATHER_POINTS`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+unsafe fn signs_avx512<const TEST: bool>(
+    points: &[[f32; 4]],
+    sorted: &[[u32; 3]],
+    odd: &[bool],
+    l: Light,
+    out: &mut [i8],
+) {
+    use std::arch::x86_64::*;
+    let vector = |f: &dyn Fn(u32) -> u32| -> __m512i {
+        let idx: [u32; WIDE] = std::array::from_fn(|i| f(i as u32));
+        // SAFETY: 16 u32 are 64 bytes.
+        unsafe { _mm512_loadu_si512(idx.as_ptr().cast()) }
+    };
+    // Lane i of corner c is element 3i + c of 48 ids in three vectors
+    // v0 | v1 | v2: the first permute takes elements below 32 from v0, v1;
+    // the second keeps those lanes and takes the rest from v2.
+    let perm = [0, 1, 2].map(|c| {
+        (
+            vector(&|i| (3 * i + c) & 31),
+            vector(&|i| if 3 * i + c < 32 { i } else { 3 * i + c - 16 }),
+        )
+    });
+    // x (even floats) and y (odd floats) of 2 × 8 gathered pairs.
+    let (even, odd_f) = (vector(&|i| 2 * i), vector(&|i| 2 * i + 1));
+    let base = points.as_ptr().cast::<f32>();
+    let mut blocks = out.chunks_exact_mut(WIDE);
+    let mut tris = sorted.chunks_exact(WIDE);
+    let mut odds = odd.chunks_exact(WIDE);
+    for ((o, t), odd) in (&mut blocks).zip(&mut tris).zip(&mut odds) {
+        let ids = t.as_ptr().cast::<u32>();
+        // SAFETY: a block is 16 triangles of 3 ids: 48 u32.
+        let v = unsafe { [0, 16, 32].map(|at| _mm512_loadu_si512(ids.add(at).cast())) };
+        let mut p = [[[0f32; WIDE]; 3]; 3];
+        for (c, p) in p.iter_mut().enumerate() {
+            let (a, b) = perm[c];
+            let id = _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(v[0], a, v[1]), b, v[2]);
+            let off = _mm512_slli_epi32::<2>(id);
+            // SAFETY: id < points.len() (caller), so 4·id + 0..=2 index the
+            // table's floats and fit an i32 (caller); the 64-bit gathers
+            // read floats 4·id and 4·id + 1.
+            unsafe {
+                let lo = _mm512_i32gather_pd::<4>(_mm512_castsi512_si256(off), base.cast());
+                let hi = _mm512_i32gather_pd::<4>(_mm512_extracti64x4_epi64::<1>(off), base.cast());
+                let (lo, hi) = (_mm512_castpd_ps(lo), _mm512_castpd_ps(hi));
+                _mm512_storeu_ps(p[0].as_mut_ptr(), _mm512_permutex2var_ps(lo, even, hi));
+                _mm512_storeu_ps(p[1].as_mut_ptr(), _mm512_permutex2var_ps(lo, odd_f, hi));
+                let z = _mm512_add_epi32(off, _mm512_set1_epi32(2));
+                _mm512_storeu_ps(p[2].as_mut_ptr(), _mm512_i32gather_ps::<4>(z, base));
+            }
+        }
+        let mut s = [0i32; WIDE];
+        for (i, s) in s.iter_mut().enumerate() {
+            let c = |p: &[[f32; WIDE]; 3]| [p[0][i], p[1][i], p[2][i]];
+            let (r0, r1, r2) = (c(&p[0]), c(&p[1]), c(&p[2]));
+            *s = if TEST {
+                sorted_sign_nb(r0, r1, r2, odd[i], l)
+            } else {
+                sorted_sign_off_corners(r0, r1, r2, odd[i], l)
+            };
+        }
+        for (o, s) in o.iter_mut().zip(s) {
+            *o = s as i8;
+        }
+    }
+    let n = blocks.into_remainder().len();
+    let at = out.len() - n;
+    signs_impl::<true>(points, &sorted[at..], &odd[at..], l, &mut out[at..]);
+}
+
 #[cfg(test)]
 mod tests {
     //! Against the record kernel, bit for bit, on tables and triangles
@@ -247,7 +395,18 @@ mod tests {
         if crate::evaluate_simd::have_avx2() {
             // SAFETY: only when the CPU has AVX2.
             unsafe { signs_avx2(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
-            v.push(("avx2", o));
+            v.push(("avx2", o.clone()));
+        }
+        #[cfg(target_arch = "x86_64")]
+        if crate::evaluate_simd::have_avx512() {
+            // SAFETY: only when the CPU has AVX-512F; ids come from `new`.
+            unsafe { signs_avx512::<true>(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
+            v.push(("avx512", o.clone()));
+            if !ix.light_on_a_corner(l) {
+                // SAFETY: as above.
+                unsafe { signs_avx512::<false>(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
+                v.push(("avx512 without the corner test", o));
+            }
         }
         v
     }
@@ -288,6 +447,53 @@ mod tests {
                         "{name}, seed {seed}, light {l:?}: first wrong triangle"
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn finds_exactly_the_lights_on_a_corner() {
+        let p = table(400, 11);
+        // Triangles over the even-numbered points only: odd ones are in
+        // the table but no corner.
+        let even: Vec<u32> = (0..p.len() as u32).step_by(2).collect();
+        let caps: Vec<[u32; 3]> = even.windows(3).map(|w| [w[2], w[0], w[1]]).collect();
+        let ix = IndexedCaps::new(&p, &caps).unwrap();
+        let used: std::collections::HashSet<u32> = caps.iter().flatten().copied().collect();
+        let mut zeros = 0;
+        for (i, q) in p.iter().enumerate() {
+            let want = used.contains(&(i as u32));
+            assert_eq!(
+                ix.light_on_a_corner([q[0], q[1], q[2], 1.0]),
+                want,
+                "point {i}"
+            );
+            // `==` equates −0.0 and +0.0, so the search must too.
+            let neg = q.map(|v| if v == 0.0 { -v } else { v });
+            zeros += (neg.map(f32::to_bits) != q.map(f32::to_bits)) as u32;
+            assert_eq!(ix.light_on_a_corner([neg[0], neg[1], neg[2], 1.0]), want);
+            // A directional light is never on a corner.
+            assert!(!ix.light_on_a_corner([q[0], q[1], q[2], 0.0]));
+            // Between two table points.
+            let off = [q[0], q[1], f32::from_bits(q[2].to_bits() + 1)];
+            if !p.contains(&off) {
+                assert!(!ix.light_on_a_corner([off[0], off[1], off[2], 1.0]));
+            }
+        }
+        assert!(zeros > 10, "the table must have zero coordinates");
+        // A corner light through the whole kernel: every version agrees
+        // with the records, whichever zero the light carries.
+        let q = p[used
+            .iter()
+            .copied()
+            .find(|&i| p[i as usize].contains(&0.0))
+            .unwrap() as usize];
+        let neg = q.map(|v| if v == 0.0 { -v } else { v });
+        for l in [[q[0], q[1], q[2], 1.0], [neg[0], neg[1], neg[2], 1.0]] {
+            let want = by_records(&p, &caps, l);
+            assert!(want.contains(&0));
+            for (name, got) in versions(&ix, l) {
+                assert_eq!(got, want, "{name}, light {l:?}");
             }
         }
     }

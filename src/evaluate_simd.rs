@@ -67,11 +67,26 @@ pub(crate) fn sorted_sign_nb(r0: [f32; 3], r1: [f32; 3], r2: [f32; 3], odd: bool
     let lp = [l[0], l[1], l[2]];
     let eq = |p: [f32; 3]| (p[0] == lp[0]) & (p[1] == lp[1]) & (p[2] == lp[2]);
     let on_corner = (l[3] == 1.0) & (eq(r0) | eq(r1) | eq(r2));
+    let sign = sorted_sign_off_corners(r0, r1, r2, odd, l);
+    if on_corner { 0 } else { sign }
+}
+
+/// [`sorted_sign_nb`] without the light-on-corner test: equal to it
+/// whenever the light is not a point light on one of the three corners
+/// (a caller that knows no corner equals the light saves the nine
+/// comparisons).
+#[inline(always)]
+pub(crate) fn sorted_sign_off_corners(
+    r0: [f32; 3],
+    r1: [f32; 3],
+    r2: [f32; 3],
+    odd: bool,
+    l: Light,
+) -> i32 {
     // The contract's expression, written once (multiplicity::ref_expr).
     let s = crate::multiplicity::ref_expr(r0, r1, r2, l);
     let sign = (s > 0.0) as i32 - (s < 0.0) as i32;
-    let sign = if odd { -sign } else { sign };
-    if on_corner { 0 } else { sign }
+    if odd { -sign } else { sign }
 }
 
 #[inline(always)]
@@ -217,6 +232,33 @@ pub(crate) fn have_avx2() -> bool {
     }
 }
 
+/// Set by [`disable_avx512`].
+static AVX512_OFF: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Makes the evaluator skip its AVX-512 kernels (AVX2 then runs where the
+/// CPU has it) until called again with `false`. For benchmarks, which time
+/// both in one run; results are bit for bit the same either way.
+#[doc(hidden)]
+pub fn disable_avx512(off: bool) {
+    AVX512_OFF.store(off, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Whether the AVX-512 kernels run: the CPU has AVX-512F (run-time check;
+/// they also use AVX2, which every AVX-512F CPU has) and
+/// [`disable_avx512`] has not turned them off.
+pub(crate) fn have_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        !AVX512_OFF.load(std::sync::atomic::Ordering::Relaxed)
+            && std::arch::is_x86_feature_detected!("avx512f")
+            && have_avx2()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// Reference orientation of every caps record (12 floats each):
 /// `out[t] = tri_sign(P0, P1, P2, l)` of record `t`, bit for bit.
 /// `data.len()` must be `12 · out.len()`.
@@ -313,6 +355,98 @@ unsafe fn gather_body<const K: usize>(tri: &[u32], parity: &[i8], caps: &[i8], o
     }
 }
 
+/// [`gather_body`] for `K` = 1 or 2 with AVX-512, 16 records per step: the
+/// signs of 16 slots fetched with one gather (four bytes at each index; the
+/// low one is the sign), multiplied by the slots' parities, and for `K` = 2
+/// the two slots of each record added after an even/odd de-interleave, then
+/// truncated to bytes. Integer sums of at most two −1/0/+1 terms: exact in
+/// any order, and they fit an i8. The tail goes through [`gather_body`].
+///
+/// Returns `false`, with `out` partly written, at the first index that is
+/// not below `caps.len() − 3` (the four-byte reads must stay inside caps);
+/// nothing past `caps` is read.
+///
+/// # Safety
+/// The CPU must have AVX-512F, and `caps.len()` must be at most `i32::MAX`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+unsafe fn sides_avx512<const K: usize>(
+    tri: &[u32],
+    parity: &[i8],
+    caps: &[i8],
+    out: &mut [i8],
+) -> bool {
+    use std::arch::x86_64::*;
+    const W: usize = 16;
+    // Indices the four-byte reads may start at: below caps.len() − 3.
+    let Some(limit) = caps.len().checked_sub(3) else {
+        return false;
+    };
+    let limit_v = _mm512_set1_epi32(limit as i32);
+    let base = caps.as_ptr();
+    // Slot signs times parities of 16 consecutive slots, as i32 lanes, or
+    // None when an index is out of the gather's range.
+    let products = |t: &[u32], p: &[i8]| -> Option<__m512i> {
+        // SAFETY: t holds 16 u32 and p 16 i8; the gather runs only when
+        // every index + 3 < caps.len() (the compare just before), so each
+        // four-byte read is inside caps.
+        unsafe {
+            let idx = _mm512_loadu_si512(t.as_ptr().cast());
+            if _mm512_cmplt_epu32_mask(idx, limit_v) != 0xFFFF {
+                return None;
+            }
+            // The low byte is the slot's sign; the three above it belong
+            // to the next triangles and are left in: the sums are taken
+            // modulo 2^32 and truncated to their low byte at the end, and
+            // the low byte of a product or sum depends only on its terms'
+            // low bytes.
+            let word = _mm512_i32gather_epi32::<1>(idx, base.cast());
+            let par = _mm512_cvtepi8_epi32(_mm_loadu_si128(p.as_ptr().cast()));
+            Some(_mm512_mullo_epi32(word, par))
+        }
+    };
+    let even: [u32; W] = std::array::from_fn(|i| 2 * i as u32);
+    let odd: [u32; W] = std::array::from_fn(|i| 2 * i as u32 + 1);
+    // SAFETY: 16 u32 are 64 bytes.
+    let (even, odd) = unsafe {
+        (
+            _mm512_loadu_si512(even.as_ptr().cast()),
+            _mm512_loadu_si512(odd.as_ptr().cast()),
+        )
+    };
+    let mut blocks = out.chunks_exact_mut(W);
+    let mut tris = tri.chunks_exact(W * K);
+    let mut pars = parity.chunks_exact(W * K);
+    for ((o, t), p) in (&mut blocks).zip(&mut tris).zip(&mut pars) {
+        let sum = if K == 1 {
+            let Some(a) = products(t, p) else {
+                return false;
+            };
+            a
+        } else {
+            let (Some(a), Some(b)) = (products(&t[..W], &p[..W]), products(&t[W..], &p[W..]))
+            else {
+                return false;
+            };
+            _mm512_add_epi32(
+                _mm512_permutex2var_epi32(a, even, b),
+                _mm512_permutex2var_epi32(a, odd, b),
+            )
+        };
+        // SAFETY: o holds 16 bytes.
+        unsafe { _mm_storeu_si128(o.as_mut_ptr().cast(), _mm512_cvtepi32_epi8(sum)) };
+    }
+    let tail = tris.remainder();
+    if tail.iter().any(|&t| t as usize >= caps.len()) {
+        return false;
+    }
+    let n = blocks.into_remainder().len();
+    let at = out.len() - n;
+    // SAFETY: every tail index was checked against caps.len() just above.
+    unsafe { gather_body::<K>(tail, pars.remainder(), caps, &mut out[at..]) };
+    true
+}
+
 /// Side multiplicities as signed sums of already evaluated triangle signs:
 /// record `r` gets `Σ_j parity[r·k + j] · caps[tri[r·k + j]]`. Every `tri`
 /// entry must index `caps` (the caller routes records with unknown slots
@@ -324,11 +458,17 @@ pub fn sides_from_caps(k: usize, tri: &[u32], parity: &[i8], caps: &[i8], out: &
     );
 }
 
-/// [`sides_from_caps`], or `false` (and `out` untouched) when some slot
-/// names no triangle (`tri` entry `>= caps.len()`, e.g. the `u32::MAX` of a
-/// slot with no matching cap in a damaged file). The check is one
-/// vectorised pass over the indices; it lets the summing loop run without a
-/// bounds check per slot.
+/// [`sides_from_caps`], or `false` when some slot names no triangle (`tri`
+/// entry `>= caps.len()`, e.g. the `u32::MAX` of a slot with no matching
+/// cap in a damaged file); `out` is then unspecified, and the caller
+/// computes it another way.
+///
+/// With AVX-512 (`k` = 1 or 2) the kernel checks each block's indices with
+/// one vector compare before its gather; elsewhere, and when an index is in
+/// the last three caps (which the kernel's four-byte reads would pass), one
+/// vectorised pass over the indices checks them all and the summing loop
+/// runs without a bounds check per slot. A separate pass read the indices
+/// twice: it took as long as the AVX-512 kernel itself.
 pub fn try_sides_from_caps(
     k: usize,
     tri: &[u32],
@@ -338,6 +478,20 @@ pub fn try_sides_from_caps(
 ) -> bool {
     assert_eq!(tri.len(), out.len() * k, "slot table size mismatch");
     assert_eq!(parity.len(), tri.len(), "slot table size mismatch");
+    #[cfg(target_arch = "x86_64")]
+    if (k == 1 || k == 2) && have_avx512() && caps.len() <= i32::MAX as usize {
+        // SAFETY: the CPU has AVX-512F and caps.len() fits an i32.
+        let done = unsafe {
+            if k == 1 {
+                sides_avx512::<1>(tri, parity, caps, out)
+            } else {
+                sides_avx512::<2>(tri, parity, caps, out)
+            }
+        };
+        if done {
+            return true;
+        }
+    }
     let max = tri.iter().fold(0u32, |a, &t| a.max(t));
     if !tri.is_empty() && max as usize >= caps.len() {
         return false;
@@ -648,9 +802,13 @@ mod tests {
     fn gather_equals_the_per_slot_sum() {
         let mut g = Gen(99);
         let caps: Vec<i8> = (0..1000).map(|_| g.below(3) as i8 - 1).collect();
-        for k in 1..=8 {
-            for n in [0, 1, 5, 64, 333] {
-                let tri: Vec<u32> = (0..n * k).map(|_| g.below(1000) as u32).collect();
+        // Indices up to the last cap (the AVX-512 path declines those: its
+        // four-byte reads would pass the end) and up to the fourth from
+        // last (it takes them); the bytes after each index are random
+        // signs, so an unmasked or unsigned byte would show.
+        for (k, bound) in (1..=8).flat_map(|k| [(k, 1000), (k, 997)]) {
+            for n in [0, 1, 5, 15, 16, 17, 64, 333] {
+                let tri: Vec<u32> = (0..n * k).map(|_| g.below(bound) as u32).collect();
                 let par: Vec<i8> = (0..n * k).map(|_| g.below(3) as i8 - 1).collect();
                 let want: Vec<i8> = tri
                     .chunks_exact(k)
@@ -664,7 +822,57 @@ mod tests {
                     .collect();
                 let mut got = vec![0i8; n];
                 sides_from_caps(k, &tri, &par, &caps, &mut got);
-                assert_eq!(got, want, "k = {k}, n = {n}");
+                assert_eq!(got, want, "k = {k}, n = {n}, bound {bound}");
+                // Each compiled body directly, not only the dispatch.
+                if k <= 2 {
+                    let mut got = vec![0i8; n];
+                    // SAFETY: every index is below caps.len().
+                    unsafe {
+                        if k == 1 {
+                            gather_body::<1>(&tri, &par, &caps, &mut got)
+                        } else {
+                            gather_body::<2>(&tri, &par, &caps, &mut got)
+                        }
+                    }
+                    assert_eq!(got, want, "plain, k = {k}, n = {n}");
+                }
+                #[cfg(target_arch = "x86_64")]
+                if have_avx512() && bound == 997 && k <= 2 {
+                    let mut got = vec![0i8; n];
+                    // SAFETY: the CPU has AVX-512F.
+                    let done = unsafe {
+                        if k == 1 {
+                            sides_avx512::<1>(&tri, &par, &caps, &mut got)
+                        } else {
+                            sides_avx512::<2>(&tri, &par, &caps, &mut got)
+                        }
+                    };
+                    assert!(done, "avx512 declined, k = {k}, n = {n}");
+                    assert_eq!(got, want, "avx512, k = {k}, n = {n}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn gather_declines_a_slot_with_no_triangle_anywhere() {
+        // A damaged file's unknown slot (u32::MAX) or an index one past the
+        // caps, in the first block, a middle block and the tail, for k = 1
+        // and 2 (the AVX-512 kernel where the CPU has it) and k = 3.
+        let caps = vec![1i8; 500];
+        for k in 1..=3 {
+            let n = 40;
+            for at in [0, 16 * k + 3, n * k - 1] {
+                for bad in [u32::MAX, 500] {
+                    let mut tri: Vec<u32> = (0..(n * k) as u32).map(|i| i % 500).collect();
+                    tri[at] = bad;
+                    let par = vec![1i8; n * k];
+                    let mut out = vec![0i8; n];
+                    assert!(
+                        !try_sides_from_caps(k, &tri, &par, &caps, &mut out),
+                        "k = {k}, slot {at} = {bad}"
+                    );
+                }
             }
         }
     }

@@ -311,7 +311,7 @@ fn ids_to_points(d: &Decoded, ids: [u32; 3]) -> Vec<Option<[f32; 3]>> {
 }
 
 /// What the shaders decided for one light.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Evaluation {
     /// Cap orientation per triangle.
     pub caps: Vec<i8>,
@@ -329,17 +329,32 @@ pub struct Evaluation {
 /// Slots without a matching triangle (a damaged file) are evaluated directly.
 ///
 /// For [`Strategy::Reference`] both halves are vectorised: the caps through
-/// [`IndexedCaps::cap_signs`] (corners sorted once per file, 8 triangles per
-/// AVX2 instruction; [`crate::evaluate_simd::cap_signs`] on the records when
-/// the file's table declines it) and the sides through the
-/// bounds-check-free gather of [`crate::evaluate_simd::try_sides_from_caps`];
-/// results are bit for bit those of the scalar loops
+/// [`IndexedCaps::cap_signs`] (corners sorted once per file; 16 triangles
+/// per AVX-512 instruction with gathered corners, or 8 per AVX2
+/// instruction; [`crate::evaluate_simd::cap_signs`] on the records when the
+/// file's table declines it) and the sides through the gathers of
+/// [`crate::evaluate_simd::try_sides_from_caps`] (16 records per step with
+/// AVX-512); results are bit for bit those of the scalar loops
 /// (`crate::evaluate::*_scalar`).
 pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
+    let mut ev = Evaluation::default();
+    evaluate_into(d, light, strategy, &mut ev);
+    ev
+}
+
+/// [`evaluate`] into the buffers of `ev`, resized to `d` (every entry is
+/// overwritten). A caller that evaluates many lights keeps one
+/// [`Evaluation`] and saves two fresh allocations per light: on a large
+/// file those are megabytes of pages the kernel must map and zero on first
+/// touch, which cost about as much as the evaluation itself (benches/evaluate.rs,
+/// `caps+sides/reference_shared` against `…_fresh`).
+pub fn evaluate_into(d: &Decoded, light: Light, strategy: Strategy, ev: &mut Evaluation) {
     if strategy == Strategy::Kim {
-        return evaluate_per_record(d, light, strategy);
+        return evaluate_sides(d, light, strategy, false, ev, |b, _, m| {
+            side_multiplicities_with(strategy, b.k, &b.data, light, m)
+        });
     }
-    evaluate_sides(d, light, strategy, true, |b, caps, m| {
+    evaluate_sides(d, light, strategy, true, ev, |b, caps, m| {
         crate::evaluate::side_multiplicities_shared(
             strategy,
             b.k,
@@ -355,36 +370,34 @@ pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
 
 /// [`evaluate`] record by record, exactly as the shaders do it.
 pub fn evaluate_per_record(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
-    evaluate_sides(d, light, strategy, false, |b, _, m| {
+    let mut ev = Evaluation::default();
+    evaluate_sides(d, light, strategy, false, &mut ev, |b, _, m| {
         side_multiplicities_with(strategy, b.k, &b.data, light, m)
-    })
+    });
+    ev
 }
 
 /// Cap signs (from the ids when `by_ids` and the strategy is the
 /// reference, else from the records), then every bucket's multiplicities
-/// through `sides(bucket, caps, out)`.
+/// through `sides(bucket, caps, out)`, into `ev`'s buffers.
 fn evaluate_sides(
     d: &Decoded,
     light: Light,
     strategy: Strategy,
     by_ids: bool,
+    ev: &mut Evaluation,
     sides: impl Fn(&DecodedBucket, &[i8], &mut [i8]),
-) -> Evaluation {
-    let mut caps = vec![0i8; d.caps.len()];
+) {
+    ev.caps.resize(d.caps.len(), 0);
     match &d.indexed {
-        Some(ix) if by_ids && strategy == Strategy::Reference => ix.cap_signs(light, &mut caps),
-        _ => cap_signs_with(strategy, &d.caps_data, light, &mut caps),
+        Some(ix) if by_ids && strategy == Strategy::Reference => ix.cap_signs(light, &mut ev.caps),
+        _ => cap_signs_with(strategy, &d.caps_data, light, &mut ev.caps),
     }
-    let sides = d
-        .buckets
-        .iter()
-        .map(|b| {
-            let mut m = vec![0i8; b.records()];
-            sides(b, &caps, &mut m);
-            m
-        })
-        .collect();
-    Evaluation { caps, sides }
+    ev.sides.resize_with(d.buckets.len(), Vec::new);
+    for (b, m) in d.buckets.iter().zip(&mut ev.sides) {
+        m.resize(b.records(), 0);
+        sides(b, &ev.caps, m);
+    }
 }
 
 /// Per-light counters of check 2.
@@ -767,6 +780,8 @@ pub fn verify_with<L: Copy + Into<VerifyLight>>(
         .iter()
         .map(|d| crate::shadow::choose_samples(d, samples, 1))
         .collect();
+    // One set of output buffers per file, reused for every light.
+    let mut evs: Vec<Evaluation> = decoded.iter().map(|_| Evaluation::default()).collect();
     for &given in lights {
         let given: VerifyLight = given.into();
         let t = std::time::Instant::now();
@@ -787,13 +802,13 @@ pub fn verify_with<L: Copy + Into<VerifyLight>>(
             orientation_errors: 0,
             time_ms: 0.0,
         };
-        for ((d, index), pts) in decoded.iter().zip(&indexes).zip(&points) {
+        for (((d, index), pts), ev) in decoded.iter().zip(&indexes).zip(&points).zip(&mut evs) {
             let light = given.in_record_space(d);
-            let ev = evaluate(d, light, strategy);
-            let c = check_closedness(d, light, &ev);
-            lr.orientation_errors += orientation_errors(d, light, &ev);
+            evaluate_into(d, light, strategy, ev);
+            let c = check_closedness(d, light, ev);
+            lr.orientation_errors += orientation_errors(d, light, ev);
             if let Some(index) = index {
-                let sh = crate::shadow::check_shadow(d, index, light, &ev, pts);
+                let sh = crate::shadow::check_shadow(d, index, light, ev, pts);
                 lr.samples += sh.samples;
                 lr.samples_on_faces += sh.on_faces;
                 lr.sample_mismatches += sh.mismatches;
