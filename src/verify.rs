@@ -18,6 +18,7 @@ use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
 use crate::evaluate_indexed::IndexedCaps;
 use crate::format::SvpkFile;
 use crate::multiplicity::{Light, cap_corner, lex_less, side_corner, to_infinity};
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 /// One mesh of a file, decoded for checking. Everything is in the mesh's
@@ -415,23 +416,59 @@ pub struct Closedness {
 
 /// Check 2 for one light: emits what the shaders draw and counts unbalanced edges.
 pub fn check_closedness(d: &Decoded, light: Light, ev: &Evaluation) -> Closedness {
+    check_closedness_with(d, light, ev, &mut ClosednessScratch::default())
+}
+
+/// Buffers of [`check_closedness_with`], kept across lights: on a large file
+/// they are tens of megabytes, and fresh pages cost as much as the check.
+#[derive(Debug, Default)]
+pub struct ClosednessScratch {
+    /// Per position, its point at infinity's bits and its id.
+    inf: Vec<([u32; 3], u32)>,
+    /// Per position, the vertex id of its point at infinity.
+    inf_id: Vec<u32>,
+    /// Per vertex id, where its edges start in `edges` (then a cursor).
+    start: Vec<u32>,
+    /// Per emitted edge, grouped by its smaller vertex id: the larger id in
+    /// the high half, the signed weight in the low half.
+    edges: Vec<u64>,
+}
+
+/// [`check_closedness`] with buffers reused across calls.
+///
+/// Every triangle the shaders draw (front and back caps, side quads as two
+/// triangles) is cut into directed edges; an undirected edge is balanced
+/// when its signed weights sum to zero. Vertex ids: finite positions
+/// `0..n`, points at infinity `n..` by distinct 4-tuple (different positions
+/// can extrude to the same point at infinity). The edges are grouped by
+/// their smaller id with a counting sort (one pass to count, one to place),
+/// and each group, a handful of edges, is sorted by the larger id and
+/// summed: linear in the number of edges, where sorting all of them (what
+/// this did before) took most of `verify`'s time on large files.
+pub fn check_closedness_with(
+    d: &Decoded,
+    light: Light,
+    ev: &Evaluation,
+    scratch: &mut ClosednessScratch,
+) -> Closedness {
+    let ClosednessScratch {
+        inf,
+        inf_id,
+        start,
+        edges,
+    } = scratch;
     let n = d.positions.len() as u32;
-    // Vertex ids: finite positions 0..n; vertices at infinity n.. by distinct
-    // 4-tuple (different positions can extrude to the same point at infinity).
-    let mut inf: Vec<([u32; 3], u32)> = d
-        .positions
-        .iter()
-        .enumerate()
-        .map(|(i, &p)| {
-            let q = to_infinity(p, light);
-            (
-                [q[0], q[1], q[2]].map(|v| if v == 0.0 { 0 } else { v.to_bits() }),
-                i as u32,
-            )
-        })
-        .collect();
+    inf.clear();
+    inf.extend(d.positions.iter().enumerate().map(|(i, &p)| {
+        let q = to_infinity(p, light);
+        (
+            [q[0], q[1], q[2]].map(|v| if v == 0.0 { 0 } else { v.to_bits() }),
+            i as u32,
+        )
+    }));
     inf.sort_unstable();
-    let mut inf_id = vec![0u32; d.positions.len()];
+    inf_id.clear();
+    inf_id.resize(d.positions.len(), 0);
     let mut next = n;
     for (i, e) in inf.iter().enumerate() {
         if i > 0 && inf[i - 1].0 != e.0 {
@@ -439,17 +476,74 @@ pub fn check_closedness(d: &Decoded, light: Light, ev: &Evaluation) -> Closednes
         }
         inf_id[e.1 as usize] = next;
     }
+    // Groups for ids 0..=next. The positions a damaged file's records name
+    // but no cap has (`UNKNOWN`), finite or at infinity, get id next + 1:
+    // the largest, so never an edge's smaller end, and it needs no group.
+    let ids = next as usize + 1;
+    let inf_id = &*inf_id;
+
+    // Pass 1 counts each vertex's edges (as the smaller end), pass 2 places
+    // them; both walk the same emission.
+    start.clear();
+    start.resize(ids + 1, 0);
+    let unknown = next + 1;
+    let rep = emit_drawn_edges(d, ev, inf_id, unknown, |x, _, _| start[x as usize + 1] += 1);
+    for v in 1..start.len() {
+        start[v] += start[v - 1];
+    }
+    edges.clear();
+    edges.resize(start[ids] as usize, 0);
+    emit_drawn_edges(d, ev, inf_id, unknown, |x, y, w| {
+        let at = &mut start[x as usize];
+        edges[*at as usize] = ((y as u64) << 32) | w as u32 as u64;
+        *at += 1;
+    });
+    // `start[v]` now is where vertex v's group ends (the next one's start).
+    let mut rep = rep;
+    let mut from = 0usize;
+    for &end in start.iter().take(ids) {
+        let group = &mut edges[from..end as usize];
+        from = end as usize;
+        group.sort_unstable();
+        let mut i = 0;
+        while i < group.len() {
+            let other = group[i] >> 32;
+            let mut sum = 0i64;
+            while i < group.len() && group[i] >> 32 == other {
+                sum += group[i] as u32 as i32 as i64;
+                i += 1;
+            }
+            rep.violations += (sum != 0) as u64;
+        }
+    }
+    rep
+}
+
+/// Walks every triangle the shaders draw for `ev` and calls
+/// `edge(smaller id, larger id, weight)` for each of its edges that is not
+/// collapsed, the weight signed by the edge's direction (positive from the
+/// smaller id to the larger). Position ids come from the file (`inf_id` maps
+/// each to its point at infinity); any without a position, finite or at
+/// infinity, becomes `unknown`. Returns the counters of [`Closedness`] except
+/// `violations`.
+fn emit_drawn_edges(
+    d: &Decoded,
+    ev: &Evaluation,
+    inf_id: &[u32],
+    unknown: u32,
+    mut edge: impl FnMut(u32, u32, i32),
+) -> Closedness {
     let mut rep = Closedness::default();
-    // Signed directed-edge weights keyed by the undirected edge.
-    let mut edges: Vec<(u64, i32)> = Vec::new();
+    let n = inf_id.len() as u32;
+    let finite = |v: u32| if v < n { v } else { unknown };
+    let at_inf = |v: u32| inf_id.get(v as usize).copied().unwrap_or(unknown);
     let mut emit = |tri: [u32; 3], weight: i32| {
         for e in 0..3 {
             let (x, y) = (tri[e], tri[(e + 1) % 3]);
             if x == y {
                 continue; // a collapsed edge is its own reverse
             }
-            let key = ((x.min(y) as u64) << 32) | x.max(y) as u64;
-            edges.push((key, if x < y { weight } else { -weight }));
+            edge(x.min(y), x.max(y), if x < y { weight } else { -weight });
         }
     };
     for (t, &c) in d.caps.iter().zip(&ev.caps) {
@@ -458,9 +552,9 @@ pub fn check_closedness(d: &Decoded, light: Light, ev: &Evaluation) -> Closednes
         }
         rep.caps += 1;
         let corner = |v: u32| {
-            let (i, at_inf) = cap_corner(v, c as i32);
+            let (i, infinite) = cap_corner(v, c as i32);
             let p = t[i as usize];
-            if at_inf { inf_id[p as usize] } else { p }
+            if infinite { at_inf(p) } else { finite(p) }
         };
         emit([corner(0), corner(1), corner(2)], 1);
         emit([corner(3), corner(4), corner(5)], 1);
@@ -473,28 +567,15 @@ pub fn check_closedness(d: &Decoded, light: Light, ev: &Evaluation) -> Closednes
             rep.silhouette_instances += 1;
             rep.side_quads += m.unsigned_abs() as u64;
             let quad = [
-                ids[0],
-                ids[1],
-                inf_id[ids[0] as usize],
-                inf_id[ids[1] as usize],
+                finite(ids[0]),
+                finite(ids[1]),
+                at_inf(ids[0]),
+                at_inf(ids[1]),
             ];
             let corner = |v: u32| quad[side_corner(v, m as i32) as usize];
             let w = m.unsigned_abs() as i32;
             emit([corner(0), corner(1), corner(2)], w);
             emit([corner(3), corner(4), corner(5)], w);
-        }
-    }
-    edges.sort_unstable_by_key(|e| e.0);
-    let mut i = 0;
-    while i < edges.len() {
-        let key = edges[i].0;
-        let mut sum = 0i64;
-        while i < edges.len() && edges[i].0 == key {
-            sum += edges[i].1 as i64;
-            i += 1;
-        }
-        if sum != 0 {
-            rep.violations += 1;
         }
     }
     rep
@@ -721,7 +802,7 @@ pub struct VerifyReport {
 /// Runs checks 1, 2 and 3 on every mesh of `file` for every light, evaluating
 /// the volumes with `strategy` (the format's is [`Strategy::Reference`]);
 /// check 3 uses `samples` points per mesh (0 skips it).
-pub fn verify<L: Copy + Into<VerifyLight>>(
+pub fn verify<L: Copy + Into<VerifyLight> + Sync>(
     file: &SvpkFile,
     lights: &[L],
     strategy: Strategy,
@@ -730,13 +811,14 @@ pub fn verify<L: Copy + Into<VerifyLight>>(
     verify_with(file, lights, strategy, samples, &|| {})
 }
 
-/// [`verify`], calling `light_done` after each light (for progress display).
-pub fn verify_with<L: Copy + Into<VerifyLight>>(
+/// [`verify`], calling `light_done` after each light (for progress display;
+/// lights run in parallel, so from any worker thread).
+pub fn verify_with<L: Copy + Into<VerifyLight> + Sync>(
     file: &SvpkFile,
     lights: &[L],
     strategy: Strategy,
     samples: usize,
-    light_done: &dyn Fn(),
+    light_done: &(dyn Fn() + Sync),
 ) -> VerifyReport {
     let start = std::time::Instant::now();
     let decoded: Vec<Decoded> = (0..file.header.meshes.len())
@@ -780,61 +862,45 @@ pub fn verify_with<L: Copy + Into<VerifyLight>>(
         .iter()
         .map(|d| crate::shadow::choose_samples(d, samples, 1))
         .collect();
-    // One set of output buffers per file, reused for every light.
-    let mut evs: Vec<Evaluation> = decoded.iter().map(|_| Evaluation::default()).collect();
-    for &given in lights {
-        let given: VerifyLight = given.into();
-        let t = std::time::Instant::now();
-        let (light, space) = match given {
-            VerifyLight::World(l) => (l, "world"),
-            VerifyLight::Record(l) => (l, "record"),
-        };
-        let mut lr = LightReport {
-            light,
-            space,
-            silhouette_instances: 0,
-            side_quads: 0,
-            caps: 0,
-            closedness_violations: 0,
-            samples: 0,
-            samples_on_faces: 0,
-            sample_mismatches: 0,
-            orientation_errors: 0,
-            time_ms: 0.0,
-        };
-        for (((d, index), pts), ev) in decoded.iter().zip(&indexes).zip(&points).zip(&mut evs) {
-            let light = given.in_record_space(d);
-            evaluate_into(d, light, strategy, ev);
-            let c = check_closedness(d, light, ev);
-            lr.orientation_errors += orientation_errors(d, light, ev);
-            if let Some(index) = index {
-                let sh = crate::shadow::check_shadow(d, index, light, ev, pts);
-                lr.samples += sh.samples;
-                lr.samples_on_faces += sh.on_faces;
-                lr.sample_mismatches += sh.mismatches;
-                if rep.first_mismatch.is_none() {
-                    rep.first_mismatch = sh.first_mismatch.map(|m| {
-                        format!(
-                            "light ({}, {}, {}, {}): {m}",
-                            light[0], light[1], light[2], light[3]
-                        )
-                    });
-                }
-            }
-            lr.silhouette_instances += c.silhouette_instances;
-            lr.side_quads += c.side_quads;
-            lr.caps += c.caps;
-            lr.closedness_violations += c.violations;
-        }
-        lr.time_ms = t.elapsed().as_secs_f64() * 1e3;
+    // Lights run in parallel, each on one worker (the evaluator's own
+    // parallel loops then mostly stay on that worker); their reports are
+    // collected in light order, so the totals and the first mismatch are
+    // those of a sequential run. Each worker takes a set of output and
+    // scratch buffers (one per file) from `spare` and returns it, so they
+    // are reused across lights instead of faulting in fresh pages.
+    let spare: std::sync::Mutex<Vec<Vec<(Evaluation, ClosednessScratch)>>> = Default::default();
+    let per_light: Vec<(LightReport, Option<String>)> = lights
+        .par_iter()
+        .map(|&given| {
+            let mut evs = spare
+                .lock()
+                .expect("no panics while held")
+                .pop()
+                .unwrap_or_else(|| decoded.iter().map(|_| Default::default()).collect());
+            let out = check_light(
+                &decoded,
+                &indexes,
+                &points,
+                &mut evs,
+                given.into(),
+                strategy,
+            );
+            spare.lock().expect("no panics while held").push(evs);
+            light_done();
+            out
+        })
+        .collect();
+    for (lr, first_mismatch) in per_light {
         rep.closedness_violations += lr.closedness_violations;
         rep.samples += lr.samples;
         rep.samples_on_faces += lr.samples_on_faces;
         rep.sample_mismatches += lr.sample_mismatches;
         rep.orientation_errors += lr.orientation_errors;
         rep.failing_lights += (lr.closedness_violations > 0 || lr.sample_mismatches > 0) as u64;
+        if rep.first_mismatch.is_none() {
+            rep.first_mismatch = first_mismatch;
+        }
         rep.lights.push(lr);
-        light_done();
     }
     rep.ok = rep.bijection_errors == 0
         && rep.record_errors == 0
@@ -842,6 +908,63 @@ pub fn verify_with<L: Copy + Into<VerifyLight>>(
         && rep.sample_mismatches == 0;
     rep.time_ms = start.elapsed().as_secs_f64() * 1e3;
     rep
+}
+
+/// Checks 2 and 3 of one light on every file: its report and its first
+/// shadow mismatch, in words.
+fn check_light(
+    decoded: &[Decoded],
+    indexes: &[Option<crate::shadow::ShadowIndex>],
+    points: &[Vec<[f32; 3]>],
+    evs: &mut [(Evaluation, ClosednessScratch)],
+    given: VerifyLight,
+    strategy: Strategy,
+) -> (LightReport, Option<String>) {
+    let t = std::time::Instant::now();
+    let (light, space) = match given {
+        VerifyLight::World(l) => (l, "world"),
+        VerifyLight::Record(l) => (l, "record"),
+    };
+    let mut lr = LightReport {
+        light,
+        space,
+        silhouette_instances: 0,
+        side_quads: 0,
+        caps: 0,
+        closedness_violations: 0,
+        samples: 0,
+        samples_on_faces: 0,
+        sample_mismatches: 0,
+        orientation_errors: 0,
+        time_ms: 0.0,
+    };
+    let mut first_mismatch = None;
+    for (((d, index), pts), (ev, scratch)) in decoded.iter().zip(indexes).zip(points).zip(evs) {
+        let light = given.in_record_space(d);
+        evaluate_into(d, light, strategy, ev);
+        let c = check_closedness_with(d, light, ev, scratch);
+        lr.orientation_errors += orientation_errors(d, light, ev);
+        if let Some(index) = index {
+            let sh = crate::shadow::check_shadow(d, index, light, ev, pts);
+            lr.samples += sh.samples;
+            lr.samples_on_faces += sh.on_faces;
+            lr.sample_mismatches += sh.mismatches;
+            if first_mismatch.is_none() {
+                first_mismatch = sh.first_mismatch.map(|m| {
+                    format!(
+                        "light ({}, {}, {}, {}): {m}",
+                        light[0], light[1], light[2], light[3]
+                    )
+                });
+            }
+        }
+        lr.silhouette_instances += c.silhouette_instances;
+        lr.side_quads += c.side_quads;
+        lr.caps += c.caps;
+        lr.closedness_violations += c.violations;
+    }
+    lr.time_ms = t.elapsed().as_secs_f64() * 1e3;
+    (lr, first_mismatch)
 }
 
 /// Parses `x,y,z,w` (w must be 0 or 1) into a light.

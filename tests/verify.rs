@@ -232,6 +232,170 @@ fn kim_evaluator_cracks_on_real_models_reference_does_not() {
     assert!(j["closedness_violations"].as_u64().unwrap() > 0, "{j}");
     assert!(j["sample_mismatches"].as_u64().unwrap() > 0, "{j}");
     assert_eq!(j["bijection_errors"], 0);
+    // Lights run in parallel: one thread reports the same, light by light,
+    // first mismatch included (only the times differ).
+    let r1 = svpack()
+        .arg("verify")
+        .arg(&out)
+        .arg("--lights=32")
+        .arg("--evaluator=kim")
+        .arg("--json")
+        .arg("--threads=1")
+        .output()
+        .unwrap();
+    let mut j1: serde_json::Value = serde_json::from_slice(&r1.stdout).unwrap();
+    let mut j = j;
+    for j in [&mut j, &mut j1] {
+        j.as_object_mut().unwrap().remove("time_ms");
+        for l in j["lights"].as_array_mut().unwrap() {
+            l.as_object_mut().unwrap().remove("time_ms");
+        }
+    }
+    assert!(j["first_mismatch"].is_string());
+    assert_eq!(j, j1);
+}
+
+/// Check 2 as it was first written, the oracle: every directed edge of what
+/// the shaders draw, keyed by its undirected edge, all sorted at once, and
+/// the keys whose weights do not cancel counted.
+fn closedness_by_sorting(
+    d: &svpack::verify::Decoded,
+    light: [f32; 4],
+    ev: &svpack::verify::Evaluation,
+) -> svpack::verify::Closedness {
+    use svpack::multiplicity::{cap_corner, side_corner, to_infinity};
+    let n = d.positions.len() as u32;
+    let mut inf: Vec<([u32; 3], u32)> = d
+        .positions
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            let q = to_infinity(p, light);
+            let key = [q[0], q[1], q[2]].map(|v| if v == 0.0 { 0 } else { v.to_bits() });
+            (key, i as u32)
+        })
+        .collect();
+    inf.sort_unstable();
+    let mut inf_id = vec![0u32; d.positions.len()];
+    let mut next = n;
+    for (i, e) in inf.iter().enumerate() {
+        if i > 0 && inf[i - 1].0 != e.0 {
+            next += 1;
+        }
+        inf_id[e.1 as usize] = next;
+    }
+    let mut rep = svpack::verify::Closedness::default();
+    let mut edges: Vec<(u64, i32)> = Vec::new();
+    let mut emit = |tri: [u32; 3], weight: i32| {
+        for e in 0..3 {
+            let (x, y) = (tri[e], tri[(e + 1) % 3]);
+            if x != y {
+                let key = ((x.min(y) as u64) << 32) | x.max(y) as u64;
+                edges.push((key, if x < y { weight } else { -weight }));
+            }
+        }
+    };
+    for (t, &c) in d.caps.iter().zip(&ev.caps) {
+        if c != 0 {
+            rep.caps += 1;
+            let corner = |v: u32| {
+                let (i, at_inf) = cap_corner(v, c as i32);
+                let p = t[i as usize];
+                if at_inf { inf_id[p as usize] } else { p }
+            };
+            emit([corner(0), corner(1), corner(2)], 1);
+            emit([corner(3), corner(4), corner(5)], 1);
+        }
+    }
+    for (b, ms) in d.buckets.iter().zip(&ev.sides) {
+        for (ids, &m) in b.ids.chunks_exact(2 + b.k).zip(ms) {
+            if m != 0 {
+                rep.silhouette_instances += 1;
+                rep.side_quads += m.unsigned_abs() as u64;
+                let (a, b) = (ids[0] as usize, ids[1] as usize);
+                let quad = [ids[0], ids[1], inf_id[a], inf_id[b]];
+                let corner = |v: u32| quad[side_corner(v, m as i32) as usize];
+                let w = m.unsigned_abs() as i32;
+                emit([corner(0), corner(1), corner(2)], w);
+                emit([corner(3), corner(4), corner(5)], w);
+            }
+        }
+    }
+    edges.sort_unstable_by_key(|e| e.0);
+    for group in edges.chunk_by(|a, b| a.0 == b.0) {
+        rep.violations += (group.iter().map(|e| e.1 as i64).sum::<i64>() != 0) as u64;
+    }
+    rep
+}
+
+/// The linear closedness check (counting sort by the smaller vertex) counts
+/// exactly what sorting every edge counts: on the hard cases and real
+/// models (open, non-manifold), under the reference (no violations), Kim's
+/// evaluator (cracks) and evaluations with signs flipped at random (many
+/// unbalanced edges, some at infinity), with one scratch reused throughout.
+#[test]
+fn closedness_counts_what_sorting_every_edge_counts() {
+    use svpack::verify::{ClosednessScratch, check_closedness_with, choose_lights};
+    let tmp = tempfile::tempdir().unwrap();
+    let mut inputs = Vec::new();
+    for c in svpack::hardcases::cases() {
+        let p = tmp.path().join(format!("{}.obj", c.name));
+        std::fs::write(&p, svpack::hardcases::obj(&c.v, &c.f)).unwrap();
+        inputs.push(p);
+    }
+    if let Some(shared) = common::shared_meshes() {
+        inputs.push(shared.join("obj/chair_model.obj"));
+        inputs.push(shared.join("obj/stanford-bunny.obj"));
+    }
+    let mut scratch = ClosednessScratch::default();
+    let mut flips = 0x9E37_79B9_7F4A_7C15u64;
+    let mut unbalanced = 0;
+    for input in inputs {
+        let out = tmp.path().join("x.svpk");
+        svpack::build::build_file(&input, &out, &Default::default()).unwrap();
+        let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+        for light in choose_lights(&d, 12, 3) {
+            for s in [Strategy::Reference, Strategy::Kim] {
+                let mut ev = evaluate(&d, light, s);
+                for flip in [false, true] {
+                    if flip {
+                        for c in ev.caps.iter_mut().chain(ev.sides.iter_mut().flatten()) {
+                            flips ^= flips << 13;
+                            flips ^= flips >> 7;
+                            flips ^= flips << 17;
+                            if flips.is_multiple_of(16) {
+                                *c = -*c;
+                            }
+                        }
+                    }
+                    let want = closedness_by_sorting(&d, light, &ev);
+                    let got = check_closedness_with(&d, light, &ev, &mut scratch);
+                    assert_eq!(got, want, "{} {s:?} {light:?} flip {flip}", input.display());
+                    unbalanced += want.violations;
+                }
+            }
+        }
+    }
+    assert!(
+        unbalanced > 1000,
+        "the flips must unbalance edges: {unbalanced}"
+    );
+}
+
+/// A damaged file's side record may name a position no cap has (`UNKNOWN`
+/// in the decoded ids): the check counts it, it does not panic.
+#[test]
+fn closedness_survives_records_naming_unknown_positions() {
+    let (_tmp, mut d) = built_fixture("two_tets.obj");
+    let light = [0.3, 2.0, 0.7, 1.0];
+    let ev = evaluate(&d, light, Strategy::Reference);
+    let (b, r) = (0..d.buckets.len())
+        .flat_map(|b| (0..ev.sides[b].len()).map(move |r| (b, r)))
+        .find(|&(b, r)| ev.sides[b][r] != 0)
+        .unwrap();
+    let k = d.buckets[b].k;
+    d.buckets[b].ids[r * (2 + k)] = svpack::verify::UNKNOWN;
+    assert!(check_closedness(&d, light, &ev).violations > 0);
 }
 
 #[test]
