@@ -448,11 +448,13 @@ pub fn check_shadow(
     let mut sides: Vec<Emitted> = Vec::new();
     let mut backs: Vec<Emitted> = Vec::new();
     for (b, ms) in d.buckets.iter().zip(&ev.sides) {
-        for (ids, &m) in b.ids.chunks_exact(2 + b.k).zip(ms) {
+        // A and B as the record stores them, what the shader extrudes (in a
+        // damaged file they may be no cap's corner, and have no id).
+        for (r, &m) in b.data.chunks_exact(4 * (2 + b.k)).zip(ms) {
             if m == 0 {
                 continue;
             }
-            let (pa, pb) = (d.positions[ids[0] as usize], d.positions[ids[1] as usize]);
+            let (pa, pb) = ([r[0], r[1], r[2]], [r[4], r[5], r[6]]);
             let quad = [fin(pa), fin(pb), inf(pa), inf(pb)];
             let quad_exact = [
                 Point::H(fin(pa)),

@@ -161,6 +161,17 @@ fn corrupted_records_fail_structure_with_exit_2() {
             }),
             "bijection_errors",
         ),
+        // An edge's end moved off every cap corner: the record names a
+        // position the caps do not have (the closedness check once indexed
+        // past its table there and panicked).
+        (
+            "moved_edge_end",
+            Box::new(|p, h| {
+                let at = (h.meshes[0].buckets[0].offset - h.payload_offset) as usize;
+                p[at..at + 4].copy_from_slice(&0.5f32.to_le_bytes());
+            }),
+            "bijection_errors",
+        ),
         // A cap corner moved.
         (
             "moved_cap",
