@@ -175,12 +175,12 @@ impl Plan {
         self.counts.iter().sum()
     }
 
-    /// Number of side fill blocks ([`BLOCK`] edges each).
+    /// Number of side fill blocks (`BLOCK` = 16,384 edges each).
     pub fn side_blocks(&self) -> usize {
         self.block_counts.len()
     }
 
-    /// Number of caps fill blocks ([`BLOCK`] triangles each).
+    /// Number of caps fill blocks (`BLOCK` = 16,384 triangles each).
     pub fn cap_blocks(&self) -> usize {
         self.triangles.div_ceil(BLOCK)
     }

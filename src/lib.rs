@@ -1,6 +1,6 @@
 //! svpack: silhouette shadow-volume geometry for WebGL 1.
 //!
-//! Data path: [`load`] → [`weld`] → [`topology`] → [`layout`] → [`format`].
+//! Data path: [`load`] → [`weld`] → [`topology`] → [`layout`] → [`format`](mod@format).
 pub mod accuracy;
 pub mod alloc;
 pub mod build;

@@ -90,7 +90,7 @@ fn code(v: f32, space: &RecordSpace, k: usize) -> u16 {
 
 /// Positions moved into record space for `enc`: unchanged for f32; for
 /// unorm16 each coordinate becomes the record-space value of its code, so
-/// that writing it back ([`f32_to_unorm16`]) gives the code again.
+/// that writing it back ([`crate::format::f32_to_unorm16`]) gives the code again.
 pub fn to_record_space(
     positions: &[[f32; 3]],
     space: &RecordSpace,

@@ -384,12 +384,12 @@ const USED: u32 = 1 << 31;
 /// positions). Drops triangles with two equal welded corners.
 ///
 /// Method: one sort. Every input vertex becomes a 128-bit word (position key
-/// above index, [`vertex_word`]); after sorting, runs of equal position keys
+/// above index, `vertex_word`); after sorting, runs of equal position keys
 /// are the welded vertices, already in lexicographic order, so numbering the
 /// runs welds and orders in one pass. A hash map of positions followed by a
 /// sort of the distinct ones did the same work twice, with a cache miss per
 /// vertex in the map. The sort is a bucket sort on x with a radix sort per
-/// bucket ([`sort_vertices`]); a comparison sort of the words was half of the
+/// bucket (`sort_vertices`); a comparison sort of the words was half of the
 /// time, mostly mispredicted compares.
 ///
 /// Every step runs in fixed blocks or on disjoint ranges, and the result is
