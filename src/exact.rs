@@ -61,8 +61,75 @@ const PERMS: [([usize; 4], i8); 24] = {
 };
 
 /// Sign (−1, 0, +1) of `det[r0; r1; r2; r3]` (rows), exactly.
+///
+/// With every `w` in {0, 1} (all the shadow check asks), row operations
+/// reduce the 4×4 determinant to a 3×3 one, decided by `robust::orient3d`
+/// (Shewchuk's adaptive exact predicate), several times cheaper than the
+/// 24-term sum below. Let `L` be the last row with `w = 1`. Subtracting it
+/// from the other rows with `w = 1` zeroes their `w` and keeps the
+/// determinant; expanding along the `w` column then leaves
+/// `(−1)^(L+3) · det3` of the other three rows' `x, y, z`. Those
+/// differences must be exact: four such rows go to `orient3d(p0, p1, p2,
+/// p3)` whole (it forms `pi − p3` exactly itself); for two or three, each
+/// difference is checked to be exact in f64 (it is unless the two values'
+/// exponents are far apart), and if one is not, the sum below decides. No
+/// row with `w = 1`: the `w` column is zero, and so is the determinant.
+/// Anything else goes through the filtered Leibniz sum and its exact
+/// fallback.
 pub fn det4_sign(r: [H; 4]) -> i32 {
-    sum_sign(&[(1, r)])
+    det4_sign_by_det3(&r).unwrap_or_else(|| sum_sign(&[(1, r)]))
+}
+
+/// The 3×3 reduction of [`det4_sign`], or `None` when a `w` is not 0 or 1
+/// or a needed difference is not exact in f64.
+fn det4_sign_by_det3(r: &[H; 4]) -> Option<i32> {
+    use robust::{Coord3D, orient3d};
+    let c = |h: [f64; 3]| Coord3D {
+        x: h[0],
+        y: h[1],
+        z: h[2],
+    };
+    let sign = |v: f64| (v > 0.0) as i32 - (v < 0.0) as i32;
+    let w = r.map(|h| h[3]);
+    if !w.iter().all(|&w| w == 0.0 || w == 1.0) {
+        return None;
+    }
+    let xyz = |h: H| [h[0], h[1], h[2]];
+    let Some(last) = (0..4).rev().find(|&i| w[i] == 1.0) else {
+        return Some(0);
+    };
+    if w.iter().all(|&w| w == 1.0) {
+        return Some(sign(orient3d(
+            c(xyz(r[0])),
+            c(xyz(r[1])),
+            c(xyz(r[2])),
+            c(xyz(r[3])),
+        )));
+    }
+    let mut o = [[0f64; 3]; 3];
+    for (slot, i) in (0..4).filter(|&i| i != last).enumerate() {
+        for a in 0..3 {
+            o[slot][a] = if w[i] == 1.0 {
+                exact_difference(r[i][a], r[last][a])?
+            } else {
+                r[i][a]
+            };
+        }
+    }
+    let zero = [0.0; 3];
+    // Cofactor sign (−1)^(last + 3).
+    let cofactor = if (last + 3) % 2 == 0 { 1 } else { -1 };
+    Some(cofactor * sign(orient3d(c(o[0]), c(o[1]), c(o[2]), c(zero))))
+}
+
+/// `a − b` when f64 holds it exactly (the rounding error of the
+/// subtraction, by Knuth's two-sum, is zero), else `None`.
+fn exact_difference(a: f64, b: f64) -> Option<f64> {
+    let x = a - b;
+    let bv = a - x;
+    let av = x + bv;
+    let err = (a - av) + (bv - b);
+    (err == 0.0).then_some(x)
 }
 
 /// Sign of `Σ c · det(r)` over `(c, r)` in `dets` (c = ±1, f32 entries),
@@ -310,6 +377,66 @@ mod tests {
         // Nearly coplanar: one ulp off the plane z = 0.3.
         let f = p(-5.5, 1e-30, f32::from_bits(0.3f32.to_bits() + 1));
         assert_ne!(det4_sign([a, b, c, f]), 0);
+    }
+
+    /// The 3×3 reduction of `det4_sign` against the general filtered sum
+    /// with its exact fallback: every pattern of `w` in {0, 1}, random
+    /// rows of mixed magnitudes (so some differences are inexact and fall
+    /// back), and rows made dependent (exactly, on small integers, or
+    /// nearly, after rounding), with a zero determinant among them.
+    #[test]
+    fn reduction_agrees_with_the_general_sum() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let coord = |n: u64| -> f32 {
+            match n % 5 {
+                0 | 1 => ((n >> 8) % 7) as f32 - 3.0,
+                2 => ((n >> 16) % 2001) as f32 / 1000.0 - 1.0,
+                3 => f32::from_bits(((n >> 16) as u32 & 0x3FFF_FFFF) | 0x0080_0000) * 1e-10,
+                _ => ((n >> 20) as i32 % 1000) as f32 * 1e5,
+            }
+        };
+        let (mut zeros, mut reduced, mut fallback) = (0, 0, 0);
+        for case in 0..60_000u32 {
+            let mut r: [H; 4] = std::array::from_fn(|_| {
+                let w = (next() % 2) as f64;
+                [
+                    coord(next()) as f64,
+                    coord(next()) as f64,
+                    coord(next()) as f64,
+                    w,
+                ]
+            });
+            if case % 3 == 0 {
+                // r3 = r0 − r1 + r2, rounded to f32: dependent, exactly when
+                // nothing rounds (small integers), else nearly.
+                let w = r[0][3] - r[1][3] + r[2][3];
+                if w == 0.0 || w == 1.0 {
+                    let f = |a: usize| (r[0][a] as f32 - r[1][a] as f32 + r[2][a] as f32) as f64;
+                    r[3] = [f(0), f(1), f(2), w];
+                }
+            }
+            let want = sum_sign(&[(1, r)]);
+            match det4_sign_by_det3(&r) {
+                Some(got) => {
+                    assert_eq!(got, want, "case {case}: {r:?}");
+                    reduced += 1;
+                }
+                None => fallback += 1,
+            }
+            assert_eq!(det4_sign(r), want);
+            zeros += (want == 0) as u32;
+        }
+        assert!(zeros > 3000, "dependent rows must occur: {zeros}");
+        assert!(
+            reduced > 30_000 && fallback > 100,
+            "{reduced} reduced, {fallback} fell back"
+        );
     }
 
     #[test]
