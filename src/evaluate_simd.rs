@@ -804,8 +804,8 @@ mod tests {
         let caps: Vec<i8> = (0..1000).map(|_| g.below(3) as i8 - 1).collect();
         // Indices up to the last cap (the AVX-512 path declines those: its
         // four-byte reads would pass the end) and up to the fourth from
-        // last (it takes them); the bytes after each index are random
-        // signs, so an unmasked or unsigned byte would show.
+        // last (it takes them); the bytes after each index are other
+        // triangles' signs, which the kernel's truncation must discard.
         for (k, bound) in (1..=8).flat_map(|k| [(k, 1000), (k, 997)]) {
             for n in [0, 1, 5, 15, 16, 17, 64, 333] {
                 let tri: Vec<u32> = (0..n * k).map(|_| g.below(bound) as u32).collect();

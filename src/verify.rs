@@ -487,7 +487,7 @@ pub fn check_closedness_with(
     start.clear();
     start.resize(ids + 1, 0);
     let unknown = next + 1;
-    let rep = emit_drawn_edges(d, ev, inf_id, unknown, |x, _, _| start[x as usize + 1] += 1);
+    let mut rep = emit_drawn_edges(d, ev, inf_id, unknown, |x, _, _| start[x as usize + 1] += 1);
     for v in 1..start.len() {
         start[v] += start[v - 1];
     }
@@ -499,7 +499,6 @@ pub fn check_closedness_with(
         *at += 1;
     });
     // `start[v]` now is where vertex v's group ends (the next one's start).
-    let mut rep = rep;
     let mut from = 0usize;
     for &end in start.iter().take(ids) {
         let group = &mut edges[from..end as usize];
