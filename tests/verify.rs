@@ -23,6 +23,21 @@ fn patch_payload(path: &std::path::Path, f: impl Fn(&mut [u8], &svpack::format::
     std::fs::write(path, bytes).unwrap();
 }
 
+/// The hard cases written as OBJ files into `dir`, then the shared OBJ
+/// models named in `models` when ../shared/meshes is present.
+fn hard_cases_and(dir: &std::path::Path, models: &[&str]) -> Vec<std::path::PathBuf> {
+    let mut inputs = Vec::new();
+    for c in svpack::hardcases::cases() {
+        let p = dir.join(format!("{}.obj", c.name));
+        std::fs::write(&p, svpack::hardcases::obj(&c.v, &c.f)).unwrap();
+        inputs.push(p);
+    }
+    if let Some(shared) = common::shared_meshes() {
+        inputs.extend(models.iter().map(|m| shared.join("obj").join(m)));
+    }
+    inputs
+}
+
 /// Builds fixture `name` into a temp dir and decodes its first mesh.
 fn built_fixture(name: &str) -> (tempfile::TempDir, svpack::verify::Decoded) {
     let tmp = tempfile::tempdir().unwrap();
@@ -348,16 +363,7 @@ fn closedness_by_sorting(
 fn closedness_counts_what_sorting_every_edge_counts() {
     use svpack::verify::{ClosednessScratch, check_closedness_with, choose_lights};
     let tmp = tempfile::tempdir().unwrap();
-    let mut inputs = Vec::new();
-    for c in svpack::hardcases::cases() {
-        let p = tmp.path().join(format!("{}.obj", c.name));
-        std::fs::write(&p, svpack::hardcases::obj(&c.v, &c.f)).unwrap();
-        inputs.push(p);
-    }
-    if let Some(shared) = common::shared_meshes() {
-        inputs.push(shared.join("obj/chair_model.obj"));
-        inputs.push(shared.join("obj/stanford-bunny.obj"));
-    }
+    let inputs = hard_cases_and(tmp.path(), &["chair_model.obj", "stanford-bunny.obj"]);
     let mut scratch = ClosednessScratch::default();
     let mut flips = 0x9E37_79B9_7F4A_7C15u64;
     let mut unbalanced = 0;
@@ -436,15 +442,7 @@ fn shared_evaluation_equals_per_record_evaluation() {
     use svpack::evaluate::Strategy;
     use svpack::verify::{choose_lights, decode, evaluate, evaluate_per_record};
     let tmp = tempfile::tempdir().unwrap();
-    let mut inputs = Vec::new();
-    for c in svpack::hardcases::cases() {
-        let p = tmp.path().join(format!("{}.obj", c.name));
-        std::fs::write(&p, svpack::hardcases::obj(&c.v, &c.f)).unwrap();
-        inputs.push(p);
-    }
-    if let Some(shared) = common::shared_meshes() {
-        inputs.push(shared.join("obj/chair_model.obj"));
-    }
+    let inputs = hard_cases_and(tmp.path(), &["chair_model.obj"]);
     for input in inputs {
         let out = tmp.path().join("x.svpk");
         svpack::build::build_file(&input, &out, &Default::default()).unwrap();
