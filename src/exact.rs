@@ -280,9 +280,97 @@ pub enum Meet {
 /// Classifies the segment `a → b` against triangle `t` (homogeneous corners;
 /// a triangle whose corners are all at infinity is met where `b` is at
 /// infinity too, i.e. the crossing happens at the end of a ray).
+///
+/// Most calls come from rays that pass well beside the triangle, and
+/// [`passes_beside`] answers those with three floating-point determinants
+/// before any exact arithmetic.
 pub fn meet(a: H, b: H, t: [H; 3]) -> Meet {
+    if passes_beside(&a, &b, &t, 0.0) {
+        return Meet::None;
+    }
+    meet_exact(a, b, t)
+}
+
+/// [`meet`] without the filter: every determinant decided exactly.
+fn meet_exact(a: H, b: H, t: [H; 3]) -> Meet {
     let v = [t[0], t[1], t[2], a, b];
     meet_by(t.map(|c| c[3] == 0.0), |i| det4_sign(i.map(|k| v[k])))
+}
+
+/// Shewchuk's static error bound for `orient3d` (his `o3derrboundA`):
+/// with every entry of the three rows exact or one rounded subtraction of
+/// exact values, the computed determinant is within this factor of the
+/// permanent (the same sum with every product taken in absolute value) of
+/// the exact one, barring underflow, which f32 entries cannot reach
+/// (nonzero differences are at least 2^-149, so products of three are far
+/// above f64's smallest normal).
+const DET3_BOUND: f64 = (7.0 + 56.0 * (f64::EPSILON / 2.0)) * (f64::EPSILON / 2.0);
+
+/// Sign of `det[r; u; v]` when the floating-point evaluation decides it
+/// with `slack` times the permanent to spare beyond Shewchuk's bound (see
+/// [`DET3_BOUND`]), 0 when it does not.
+#[inline(always)]
+fn det3_sign_filtered(r: [f64; 3], u: [f64; 3], v: [f64; 3], slack: f64) -> i32 {
+    let (uxvy, vxuy) = (u[0] * v[1], v[0] * u[1]);
+    let (vxry, rxvy) = (v[0] * r[1], r[0] * v[1]);
+    let (rxuy, uxry) = (r[0] * u[1], u[0] * r[1]);
+    let det = r[2] * (uxvy - vxuy) + u[2] * (vxry - rxvy) + v[2] * (rxuy - uxry);
+    let permanent = (uxvy.abs() + vxuy.abs()) * r[2].abs()
+        + (vxry.abs() + rxvy.abs()) * u[2].abs()
+        + (rxuy.abs() + uxry.abs()) * v[2].abs();
+    let bound = (DET3_BOUND + slack) * permanent;
+    (det > bound) as i32 - (det < -bound) as i32
+}
+
+/// True when the segment or ray from the finite point `a` to `b` certainly
+/// passes beside triangle `t`, in which case [`meet`] answers
+/// [`Meet::None`]; false when that is not certain (then the exact path
+/// decides) or when a `w` is not what this needs (`a` finite, every other
+/// `w` 0 or 1).
+///
+/// With `slack > 0` the answer also holds for every nearby triangle whose
+/// corners at infinity differ from `t`'s by a relative `slack / 4` or less
+/// in each component: each product in the determinants has at most two
+/// such factors, so moves by less than `slack` of its magnitude, and the
+/// determinant by less than `slack` times the permanent, which the margin
+/// covers. The shadow check uses this for the exact extrusions that the
+/// f32 corners round ([`crate::exact::Point::Away`]): one rounding,
+/// relative 2^-24.
+///
+/// Why this is the same answer: [`meet`]'s three edge determinants
+/// `det[a; b; t_i; t_j]` (i, j = 0 1, 1 2, 2 0) are, after subtracting row
+/// `a` from every row with `w = 1` and expanding along the `w` column, all
+/// `−det3(b', t_i', t_j')`, where `x'` is `x − a` for a finite `x` and `x`
+/// itself for a direction. If one of them is certainly positive and another
+/// certainly negative, [`meet`] answers `None` whatever its plane tests
+/// say: every branch before the edge test also answers `None`. The
+/// differences are rounded here, which the bound allows for; nothing is
+/// decided exactly, so the filter only ever short-cuts to an answer the
+/// exact path gives.
+#[inline]
+pub fn passes_beside(a: &H, b: &H, t: &[H; 3], slack: f64) -> bool {
+    if a[3] != 1.0 {
+        return false;
+    }
+    let rel = |p: &H| -> Option<[f64; 3]> {
+        if p[3] == 1.0 {
+            Some([p[0] - a[0], p[1] - a[1], p[2] - a[2]])
+        } else if p[3] == 0.0 {
+            Some([p[0], p[1], p[2]])
+        } else {
+            None
+        }
+    };
+    let (Some(r), Some(u0), Some(u1), Some(u2)) = (rel(b), rel(&t[0]), rel(&t[1]), rel(&t[2]))
+    else {
+        return false;
+    };
+    let s = [
+        det3_sign_filtered(r, u0, u1, slack),
+        det3_sign_filtered(r, u1, u2, slack),
+        det3_sign_filtered(r, u2, u0, slack),
+    ];
+    s.contains(&1) && s.contains(&-1)
 }
 
 /// [`meet`] for corners and end points that may be exact extrusion
@@ -480,6 +568,122 @@ mod tests {
         // det[B, A − L, B − L, S] = det[B, A, B, S] − det[B, A, L, S]
         //   − det[B, L, B, S] + det[B, L, L, S] = −det[B, A, L, S].
         assert_eq!(sign, -det4_sign([b, a, l, s]));
+    }
+
+    /// The filter in front of [`meet`] against the exact path alone, on
+    /// 200,000 segments and rays: random ones (most pass beside, which the
+    /// filter must answer), ones starting on the triangle, and ones aimed
+    /// at a corner, an edge's midpoint or the plane, exactly and one ulp off, at coordinates of mixed
+    /// magnitudes where f64 rounding is large against the determinants.
+    #[test]
+    fn filter_agrees_with_the_exact_path() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let coord = |n: u64| -> f32 {
+            match n % 4 {
+                0 => ((n >> 8) % 9) as f32 - 4.0,
+                1 => ((n >> 16) % 2001) as f32 / 1000.0 - 1.0,
+                2 => 1000.0 + ((n >> 16) % 4001) as f32 / 4096.0,
+                _ => f32::from_bits(((n >> 16) as u32 & 0x0FFF_FFFF) | 0x3000_0000) - 0.75,
+            }
+        };
+        let ulp = |v: f64, up: bool| -> f64 {
+            let f = v as f32;
+            let b = f.to_bits();
+            let g = if (f >= 0.0) == up {
+                b + 1
+            } else {
+                b.wrapping_sub(1)
+            };
+            if f == 0.0 {
+                f32::from_bits(1) as f64
+            } else {
+                f32::from_bits(g) as f64
+            }
+        };
+        let (mut filtered, mut declined) = (0, 0);
+        let mut kinds = [0usize; 4];
+        for i in 0..200_000 {
+            let r = next();
+            let mut pt = || [coord(next()), coord(next()), coord(next())];
+            let w = |bit: u64| if r >> bit & 1 == 0 { 1.0 } else { 0.0 };
+            let t: [H; 3] = [0, 1, 2].map(|k| {
+                let c = pt();
+                let w = if k == 0 { 1.0 } else { w(k as u64) };
+                [c[0] as f64, c[1] as f64, c[2] as f64, w]
+            });
+            // Sometimes a starts on the triangle: at its first corner, or
+            // at the rounded midpoint of its first edge.
+            let a = match (r >> 20) % 4 {
+                1 => t[0],
+                2 if t[1][3] == 1.0 => {
+                    let m = [0, 1, 2].map(|k| ((t[0][k] + t[1][k]) / 2.0) as f32 as f64);
+                    [m[0], m[1], m[2], 1.0]
+                }
+                _ => {
+                    let c = pt();
+                    [c[0] as f64, c[1] as f64, c[2] as f64, 1.0]
+                }
+            };
+            let mut b = {
+                let c = pt();
+                [c[0] as f64, c[1] as f64, c[2] as f64, w(3)]
+            };
+            // Aim at a corner, an edge's midpoint (rounded to f32) or the
+            // plane's centroid, then maybe nudge one coordinate by an ulp.
+            let aim = (r >> 8) % 4;
+            if aim > 0 && t.iter().all(|c| c[3] == 1.0) {
+                let target: [f64; 3] = match aim {
+                    1 => [t[0][0], t[0][1], t[0][2]],
+                    2 => [0, 1, 2].map(|k| ((t[1][k] + t[2][k]) / 2.0) as f32 as f64),
+                    _ => [0, 1, 2].map(|k| ((t[0][k] + t[1][k] + t[2][k]) / 3.0) as f32 as f64),
+                };
+                b = if b[3] == 1.0 {
+                    [target[0], target[1], target[2], 1.0]
+                } else {
+                    // The direction from a to the target, rounded.
+                    let dir = [0, 1, 2].map(|k| (target[k] - a[k]) as f32 as f64);
+                    [dir[0], dir[1], dir[2], 0.0]
+                };
+                if r >> 12 & 1 == 1 {
+                    let k = (r >> 13) as usize % 3;
+                    b[k] = ulp(b[k], r >> 15 & 1 == 1);
+                }
+            }
+            if b[..3] == a[..3] && b[3] == 1.0 {
+                continue;
+            }
+            let exact = meet_exact(a, b, t);
+            if passes_beside(&a, &b, &t, 0.0) {
+                filtered += 1;
+                assert_eq!(
+                    exact,
+                    Meet::None,
+                    "case {i}: filter said beside, {a:?} {b:?} {t:?}"
+                );
+            } else {
+                declined += 1;
+            }
+            kinds[match exact {
+                Meet::None => 0,
+                Meet::Cross(_) => 1,
+                Meet::AOnTriangle => 2,
+                Meet::Degenerate => 3,
+            }] += 1;
+            assert_eq!(meet(a, b, t), exact, "case {i}");
+        }
+        // Not vacuous: the filter answers most calls, declines many, and
+        // every kind of answer occurs.
+        assert!(
+            filtered > 80_000 && declined > 20_000,
+            "{filtered} {declined}"
+        );
+        assert!(kinds.iter().all(|&k| k > 50), "{kinds:?}");
     }
 
     #[test]

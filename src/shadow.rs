@@ -23,7 +23,7 @@
 //! crossed or not depending only on the ray direction, so their contribution
 //! is computed once per direction.
 
-use crate::exact::{H, Meet, Point, meet, meet_points};
+use crate::exact::{H, Meet, Point, meet, meet_points, passes_beside};
 use crate::multiplicity::{Light, side_corner, to_infinity};
 use crate::verify::{Decoded, Evaluation, Rng};
 use rayon::prelude::*;
@@ -225,24 +225,34 @@ pub struct ShadowReport {
     pub first_mismatch: Option<String>,
 }
 
-/// Side triangles bucketed by their projection along a ray direction, over
-/// the projected bounds of the samples: a ray from P along the direction can
-/// only cross triangles whose projection contains P's (a conservative filter,
-/// for both the emitted and the exactly extruded corners; the exact test
-/// decides).
-struct SideGrid {
-    u: [f64; 3],
-    v: [f64; 3],
-    lo: [f64; 2],
-    cell: [f64; 2],
-    cells: Vec<Vec<u32>>,
+/// For each sample, the side triangles that a ray from it along one
+/// direction may cross, for both the emitted and the exactly extruded
+/// corners; the exact test decides.
+///
+/// Two filters, both conservative. First a coarse one: samples are bucketed
+/// in a grid over their projection along the direction, and each side
+/// triangle visits the cells its projected bounds reach (unbounded where a
+/// corner at infinity points). Then, per sample in those cells,
+/// [`passes_beside`] with slack for the exact extrusions. Side triangles
+/// reach far (a corner at infinity makes their projection unbounded), so
+/// the coarse filter alone left about 12,000 candidates per sample on the
+/// 871k-triangle dragon, each an exact test, and about 30M grid entries
+/// per light to build (sides in cells; bucketing the samples instead keeps
+/// the grid at one entry per sample).
+struct SideCandidates {
+    /// Per sample, indices into the side triangles.
+    lists: Vec<Vec<u32>>,
 }
 
-const GRID: usize = 48;
+/// Relative slack of [`passes_beside`] here, so its answer covers the
+/// exact extrusion `P − L` of every corner at infinity as well as the
+/// emitted f32 one (one rounding: relative 2^-24, within `slack / 4`).
+const EXTRUSION_SLACK: f64 = 1.0 / (1u64 << 20) as f64;
 
-impl SideGrid {
-    fn new(sides: &[Emitted], dir: [f32; 3], samples: &[[f32; 3]]) -> SideGrid {
+impl SideCandidates {
+    fn new(sides: &[Emitted], dir: [f32; 3], samples: &[[f32; 3]]) -> SideCandidates {
         let d = dir.map(|x| x as f64);
+        let dh = [d[0], d[1], d[2], 0.0];
         let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let d = d.map(|x| x / n);
         let a = if d[0].abs() < 0.5 {
@@ -284,8 +294,18 @@ impl SideGrid {
             lo[k] -= 1e-6 * span;
             hi[k] += 1e-6 * span;
         }
-        let cell = [0, 1].map(|k| (hi[k] - lo[k]) / GRID as f64);
-        let mut cells = vec![Vec::new(); GRID * GRID];
+        // About one sample per cell.
+        let grid = (samples.len() as f64).sqrt().ceil().clamp(1.0, 64.0) as usize;
+        let cell = [0, 1].map(|k| (hi[k] - lo[k]) / grid as f64);
+        let cell_of =
+            |q: f64, k: usize| (((q - lo[k]) / cell[k]).floor().max(0.0) as usize).min(grid - 1);
+        let mut cells = vec![Vec::new(); grid * grid];
+        for (j, s) in samples.iter().enumerate() {
+            let q = proj(s.map(|x| x as f64));
+            cells[cell_of(q[1], 1) * grid + cell_of(q[0], 0)].push(j as u32);
+        }
+        let points: Vec<H> = samples.iter().map(|&s| fin(s)).collect();
+        let mut lists = vec![Vec::new(); samples.len()];
         for (i, e) in sides.iter().enumerate() {
             let mut blo = [f64::INFINITY; 2];
             let mut bhi = [f64::NEG_INFINITY; 2];
@@ -320,31 +340,21 @@ impl SideGrid {
             }
             let range = |k: usize| {
                 let a = ((blo[k] - lo[k]) / cell[k]).floor().max(0.0) as usize;
-                let b = ((bhi[k] - lo[k]) / cell[k]).floor().min((GRID - 1) as f64) as usize;
-                a.min(GRID - 1)..=b
+                let b = ((bhi[k] - lo[k]) / cell[k]).floor().min((grid - 1) as f64) as usize;
+                a.min(grid - 1)..=b
             };
             for y in range(1) {
                 for x in range(0) {
-                    cells[y * GRID + x].push(i as u32);
+                    for &j in &cells[y * grid + x] {
+                        let p = &points[j as usize];
+                        if !passes_beside(p, &dh, &e.corners, EXTRUSION_SLACK) {
+                            lists[j as usize].push(i as u32);
+                        }
+                    }
                 }
             }
         }
-        SideGrid {
-            u,
-            v,
-            lo,
-            cell,
-            cells,
-        }
-    }
-
-    fn candidates(&self, s: [f32; 3]) -> &[u32] {
-        let q = s.map(|x| x as f64);
-        let pu = q[0] * self.u[0] + q[1] * self.u[1] + q[2] * self.u[2];
-        let pv = q[0] * self.v[0] + q[1] * self.v[1] + q[2] * self.v[2];
-        let x = (((pu - self.lo[0]) / self.cell[0]).floor().max(0.0) as usize).min(GRID - 1);
-        let y = (((pv - self.lo[1]) / self.cell[1]).floor().max(0.0) as usize).min(GRID - 1);
-        &self.cells[y * GRID + x]
+        SideCandidates { lists }
     }
 }
 
@@ -392,59 +402,48 @@ enum Cast {
     Degenerate,
 }
 
-/// Checks `samples` against the volume emitted under `ev` for `light`.
+/// Corner `p` extruded to infinity as the shaders do (`toInf`, rounded).
+fn inf(p: [f32; 3], light: Light) -> H {
+    hom(to_infinity(p, light))
+}
+
+/// Corner `p` extruded to infinity exactly: `P − L` for a point light.
+fn inf_exact(p: [f32; 3], light: Light) -> Point {
+    if light[3] == 1.0 {
+        Point::Away(fin(p), hom(light))
+    } else {
+        Point::H(inf(p, light))
+    }
+}
+
+/// False for a triangle with two equal corners or a corner that is no point.
 ///
-/// A sample whose winding differs from the truth is compared with a second
-/// volume first: the same triangles with the corners at infinity extruded
-/// exactly (`P − L`, [`Point::Away`]) instead of the contract's f32
-/// `toInf(P)`. If that volume's winding is the truth, the mismatch is the
-/// rounding of the extrusion alone: the sample lies between an emitted side
-/// quad and where the quad would be without rounding. Such a sample is
-/// counted in [`ShadowReport::on_faces`] (and in
-/// [`ShadowReport::extrusion_rounding`]), not compared. The wedge between the
-/// two is normally about 2^-24 rad wide; it is wide when a point light is
-/// nearly on an edge's line, where the side plane through the light and the
-/// edge is ill-conditioned (its angle error is about the rounding of `B − L`
-/// over the light's distance from the line). Directional lights extrude
-/// exactly (`toInf(P) = −L`), so only point lights have such samples.
-pub fn check_shadow(
-    d: &Decoded,
-    index: &ShadowIndex,
-    light: Light,
-    ev: &Evaluation,
-    samples: &[[f32; 3]],
-) -> ShadowReport {
-    let inf = |p: [f32; 3]| hom(to_infinity(p, light));
-    let rounds = light[3] == 1.0;
-    let inf_exact = |p: [f32; 3]| {
-        if rounds {
-            Point::Away(fin(p), hom(light))
-        } else {
-            Point::H(inf(p))
-        }
-    };
-    // Triangles with two equal corners (e.g. every back cap of a directional
-    // light) have no area and no boundary: no ray crosses them. A corner
-    // (0, 0, 0, 0) cannot occur (the contract gives 0 when the light is on a
-    // corner), but would be no point at all. (`meet` answers `None` for both:
-    // every determinant with such a triangle is 0. So a triangle kept for one
-    // of its two versions is harmless in the other.)
-    let usable = |c: &[H; 3]| {
-        c[0] != c[1]
-            && c[1] != c[2]
-            && c[0] != c[2]
-            && !c.iter().any(|h| h.iter().all(|&v| v == 0.0))
-    };
-    let usable_exact = |c: &[Point; 3]| {
-        c[0] != c[1]
-            && c[1] != c[2]
-            && c[0] != c[2]
-            && !c.iter().any(|p| match p {
-                Point::H(h) => h.iter().all(|&v| v == 0.0),
-                Point::Away(p, l) => p == l,
-            })
-    };
-    // Side triangles and back caps (front caps are the indexed triangles).
+/// Triangles with two equal corners (e.g. every back cap of a directional
+/// light) have no area and no boundary: no ray crosses them. A corner
+/// (0, 0, 0, 0) cannot occur (the contract gives 0 when the light is on a
+/// corner), but would be no point at all. (`meet` answers `None` for both:
+/// every determinant with such a triangle is 0. So a triangle kept for one
+/// of its two versions is harmless in the other.)
+fn usable(c: &[H; 3]) -> bool {
+    c[0] != c[1] && c[1] != c[2] && c[0] != c[2] && !c.iter().any(|h| h.iter().all(|&v| v == 0.0))
+}
+
+/// [`usable`] for exactly extruded corners.
+fn usable_exact(c: &[Point; 3]) -> bool {
+    c[0] != c[1]
+        && c[1] != c[2]
+        && c[0] != c[2]
+        && !c.iter().any(|p| match p {
+            Point::H(h) => h.iter().all(|&v| v == 0.0),
+            Point::Away(p, l) => p == l,
+        })
+}
+
+/// The side triangles the shaders draw for `light` under `ev`, each with its
+/// stencil weight, as emitted and as extruded exactly.
+fn emitted_sides(d: &Decoded, light: Light, ev: &Evaluation) -> Vec<Emitted> {
+    let inf = |p: [f32; 3]| inf(p, light);
+    let inf_exact = |p: [f32; 3]| inf_exact(p, light);
     let mut sides: Vec<Emitted> = Vec::new();
     for (b, ms) in d.buckets.iter().zip(&ev.sides) {
         // A and B as the record stores them, what the shader extrudes (in a
@@ -477,6 +476,36 @@ pub fn check_shadow(
             }
         }
     }
+    sides
+}
+
+/// Checks `samples` against the volume emitted under `ev` for `light`.
+///
+/// A sample whose winding differs from the truth is compared with a second
+/// volume first: the same triangles with the corners at infinity extruded
+/// exactly (`P − L`, [`Point::Away`]) instead of the contract's f32
+/// `toInf(P)`. If that volume's winding is the truth, the mismatch is the
+/// rounding of the extrusion alone: the sample lies between an emitted side
+/// quad and where the quad would be without rounding. Such a sample is
+/// counted in [`ShadowReport::on_faces`] (and in
+/// [`ShadowReport::extrusion_rounding`]), not compared. The wedge between the
+/// two is normally about 2^-24 rad wide; it is wide when a point light is
+/// nearly on an edge's line, where the side plane through the light and the
+/// edge is ill-conditioned (its angle error is about the rounding of `B − L`
+/// over the light's distance from the line). Directional lights extrude
+/// exactly (`toInf(P) = −L`), so only point lights have such samples.
+pub fn check_shadow(
+    d: &Decoded,
+    index: &ShadowIndex,
+    light: Light,
+    ev: &Evaluation,
+    samples: &[[f32; 3]],
+) -> ShadowReport {
+    let inf = |p: [f32; 3]| inf(p, light);
+    let inf_exact = |p: [f32; 3]| inf_exact(p, light);
+    let rounds = light[3] == 1.0;
+    // Side triangles; the front caps are the indexed triangles.
+    let sides = emitted_sides(d, light, ev);
     // The back caps are made on the fly where they are used (once per
     // direction): kept, they were about 300 bytes per triangle for each
     // light, 260 MB on the 871k-triangle dragon.
@@ -501,11 +530,12 @@ pub fn check_shadow(
     // back-cap terms for the emitted and for the exactly extruded volume.
     let back_terms: [Vec<OnceLock<Option<i32>>>; 2] =
         [0, 1].map(|_| (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect());
-    let grids: Vec<OnceLock<SideGrid>> = (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
+    let candidates: Vec<OnceLock<SideCandidates>> =
+        (0..DIRECTIONS.len()).map(|_| OnceLock::new()).collect();
     // Winding of the emitted volume (`exact` false) or of the exactly
     // extruded one at sample `s`, along direction `k`.
-    let cast = |s: [f32; 3], k: usize, exact: bool| -> Cast {
-        let p = fin(s);
+    let cast = |j: usize, k: usize, exact: bool| -> Cast {
+        let p = fin(samples[j]);
         let p3 = [p[0], p[1], p[2]];
         let dk = DIRECTIONS[k];
         let dh = [dk[0] as f64, dk[1] as f64, dk[2] as f64, 0.0];
@@ -519,12 +549,36 @@ pub fn check_shadow(
         let Some(back) = *back_terms[exact as usize][k].get_or_init(|| {
             // Back caps meet the ray only at its end at infinity, where
             // the answer does not depend on P: any finite point will do.
+            let origin = [0.0, 0.0, 0.0, 1.0];
             let mut sum = 0;
-            for e in backs() {
-                match meet_e([0.0, 0.0, 0.0, 1.0], &e) {
-                    Meet::Cross(sg) => sum += sg * e.weight,
-                    Meet::None => {}
-                    _ => return None,
+            let mut add = |m: Meet| match m {
+                Meet::Cross(sg) => {
+                    sum += sg;
+                    true
+                }
+                Meet::None => true,
+                _ => false,
+            };
+            if exact {
+                for e in backs() {
+                    if !add(meet_e(origin, &e)) {
+                        return None;
+                    }
+                }
+            } else {
+                // The emitted caps straight from the triangles, with no
+                // exact corners and no usability test (every back cap of
+                // the emitted volume is visited, once per light and
+                // direction): `meet` answers `None` for an unusable one,
+                // as it would be left out (see `usable`).
+                for (t, &c) in index.tris.iter().zip(&ev.caps) {
+                    if c == 0 {
+                        continue;
+                    }
+                    let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
+                    if !add(meet(origin, dh, [inf(t[2]), inf(p1), inf(p0)])) {
+                        return None;
+                    }
                 }
             }
             Some(sum)
@@ -534,8 +588,8 @@ pub fn check_shadow(
         let mut w = back;
         let mut ok = true;
         let mut on_face = false;
-        let grid = grids[k].get_or_init(|| SideGrid::new(&sides, dk, samples));
-        for &i in grid.candidates(s) {
+        let lists = candidates[k].get_or_init(|| SideCandidates::new(&sides, dk, samples));
+        for &i in &lists.lists[j] {
             let e = &sides[i as usize];
             match meet_e(p, e) {
                 Meet::Cross(sg) => w += sg * e.weight,
@@ -570,9 +624,9 @@ pub fn check_shadow(
     };
     // First direction whose ray touches nothing degenerately; `None` when
     // the sample is on a face (or every direction is degenerate).
-    let winding = |s: [f32; 3], exact: bool| -> Option<i32> {
+    let winding = |j: usize, exact: bool| -> Option<i32> {
         for k in 0..DIRECTIONS.len() {
-            match cast(s, k, exact) {
+            match cast(j, k, exact) {
                 Cast::Winding(w) => return Some(w),
                 Cast::OnFace => return None,
                 Cast::Degenerate => {}
@@ -584,12 +638,13 @@ pub fn check_shadow(
     // ambiguous), and whether a mismatch is the extrusion's rounding alone.
     let outcomes: Vec<(Option<i32>, Option<i32>, bool)> = samples
         .par_iter()
-        .map(|&s| {
+        .enumerate()
+        .map(|(j, &s)| {
             let truth = occluders(index, light, s).map(|n| n as i32);
-            let w = truth.and(winding(s, false));
+            let w = truth.and(winding(j, false));
             let rounding = rounds
                 && matches!((w, truth), (Some(w), Some(t)) if w != t)
-                && winding(s, true) == truth;
+                && winding(j, true) == truth;
             (w, truth, rounding)
         })
         .collect();
@@ -623,6 +678,107 @@ mod tests {
     use super::*;
     use crate::evaluate::Strategy;
     use crate::verify::{decode, evaluate, orientation_errors};
+
+    /// The candidate lists against every side triangle: a side that a
+    /// sample's ray meets in any way (crossing, touching, starting on it),
+    /// as emitted or as extruded exactly, is on the sample's list. On the
+    /// folded pair of the test below (a point light 3.5e-7 from an edge's
+    /// line, whose rounded extrusion turns a side triangle by 1.19°) and on
+    /// a bumpy grid, with samples from `choose_samples` and samples placed
+    /// on the lines of the exact and the rounded side edges, where rays
+    /// touch and the two versions differ.
+    #[test]
+    fn side_candidates_hold_every_side_a_ray_meets() {
+        let folded = (
+            vec![
+                [-1.0, -8.727_353_7e-7, 0.5],
+                [2.173_373_6e-7, 1.907_575_3e-7, -0.5],
+                [26.664_402, -0.5, 1.0],
+                [243.194_99, 8.764_287e-7, 1.0],
+                [718.601_9, -4.526_546_6e-7, 740.013_24],
+            ],
+            vec![[1, 0, 2], [0, 4, 1]],
+            vec![[-0.5, 0.0, 0.0, 1.0], [0.3, 1.0, -0.2, 0.0]],
+        );
+        let bumpy = crate::hardcases::grid(12, |x, y| [x, y, 0.3 * (7.0 * x).sin() * y]);
+        let bumpy = (
+            bumpy.0,
+            bumpy.1,
+            vec![
+                [0.5, 0.5, 2.0, 1.0],
+                [0.31, 0.27, 0.05, 1.0],
+                [0.2, -0.3, 1.0, 0.0],
+            ],
+        );
+        let tmp = tempfile::tempdir().unwrap();
+        let (mut met, mut listed, mut pairs) = (0usize, 0usize, 0usize);
+        for (n, (v, f, lights)) in [folded, bumpy].into_iter().enumerate() {
+            let (input, output) = (
+                tmp.path().join(format!("{n}.obj")),
+                tmp.path().join(format!("{n}.svpk")),
+            );
+            std::fs::write(&input, crate::hardcases::obj(&v, &f)).unwrap();
+            crate::build::build_file(&input, &output, &Default::default()).unwrap();
+            let d = decode(&crate::format::read_file(&output).unwrap(), 0);
+            for light in lights {
+                let ev = evaluate(&d, light, Strategy::Reference);
+                let sides = emitted_sides(&d, light, &ev);
+                assert!(!sides.is_empty());
+                let mut samples = choose_samples(&d, 200, 7);
+                // Points on the lines of the side triangles' edges, rounded
+                // to f32: on or next to the emitted and the exact edges,
+                // which differ where an extrusion rounds.
+                for e in &sides {
+                    for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+                        let (p, q) = (e.exact[i], e.exact[j]);
+                        let (Point::H(p), q) = (p, q) else { continue };
+                        if p[3] != 1.0 {
+                            continue;
+                        }
+                        let dirs = match q {
+                            Point::H(q) if q[3] == 1.0 => {
+                                vec![[q[0] - p[0], q[1] - p[1], q[2] - p[2]]]
+                            }
+                            Point::H(q) => vec![[q[0], q[1], q[2]]],
+                            Point::Away(a, l) => vec![
+                                [a[0] - l[0], a[1] - l[1], a[2] - l[2]],
+                                [e.corners[j][0], e.corners[j][1], e.corners[j][2]],
+                            ],
+                        };
+                        for dv in dirs {
+                            for t in [0.25, 0.5, 3.0, 50.0, 1000.0] {
+                                samples.push([0, 1, 2].map(|k| (p[k] + t * dv[k]) as f32));
+                            }
+                        }
+                    }
+                }
+                for (k, &dir) in DIRECTIONS.iter().enumerate().take(2) {
+                    let lists = SideCandidates::new(&sides, dir, &samples);
+                    let dh = [dir[0] as f64, dir[1] as f64, dir[2] as f64, 0.0];
+                    for (j, &s) in samples.iter().enumerate() {
+                        let p = fin(s);
+                        listed += lists.lists[j].len();
+                        for (i, e) in sides.iter().enumerate() {
+                            pairs += 1;
+                            let rounded = meet(p, dh, e.corners) != Meet::None;
+                            let exact =
+                                meet_points(Point::H(p), Point::H(dh), e.exact) != Meet::None;
+                            if rounded || exact {
+                                met += 1;
+                                assert!(
+                                    lists.lists[j].contains(&(i as u32)),
+                                    "light {light:?}, direction {k}, sample {s:?}: side {i} met but not listed"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Not vacuous: rays meet sides, and the lists leave most pairs out.
+        assert!(met > 1000, "{met}");
+        assert!(listed * 4 < pairs, "{listed} of {pairs}");
+    }
 
     /// The shrunk case of `random_soups_verify` (tests/hard_cases.rs): two
     /// triangles folded over the edge A = v0, B = v1, and a point light
