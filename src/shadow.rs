@@ -66,8 +66,15 @@ impl Bvh {
             order: (0..tris.len() as u32).collect(),
         };
         if !tris.is_empty() {
+            // Each triangle's corner sums, the split keys, computed once:
+            // the selection compares keys about 2n times per level.
+            let keys: Vec<[f64; 3]> = tris
+                .par_iter()
+                .map(|t| [0, 1, 2].map(|k| t.iter().map(|p| p[k] as f64).sum()))
+                .collect();
+            let mut scratch = Vec::new();
             let n = tris.len();
-            bvh.build(tris, 0, n);
+            bvh.build(tris, &keys, &mut scratch, 0, n);
         }
         bvh
     }
@@ -92,23 +99,55 @@ impl Bvh {
         b
     }
 
-    fn build(&mut self, tris: &[[[f32; 3]; 3]], first: usize, count: usize) -> u32 {
+    fn build(
+        &mut self,
+        tris: &[[[f32; 3]; 3]],
+        keys: &[[f64; 3]],
+        scratch: &mut Vec<(f64, u32)>,
+        first: usize,
+        count: usize,
+    ) -> u32 {
         let node = self.nodes.len() as u32;
-        let b = Self::bbox(tris, &self.order[first..first + count]);
-        self.boxes.push(b);
         self.nodes.push((first as u32, count as u32, 0));
+        self.boxes.push([0.0; 6]);
         if count <= 4 {
+            self.boxes[node as usize] = Self::bbox(tris, &self.order[first..first + count]);
             return node;
         }
+        // Split at the median key along the axis where the keys spread
+        // most. The triangles of this node go side by side with their keys,
+        // so the selection reads one array; ties are broken by id, so the
+        // split is fully determined.
+        let ids = &mut self.order[first..first + count];
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for &i in ids.iter() {
+            let k = keys[i as usize];
+            for a in 0..3 {
+                lo[a] = lo[a].min(k[a]);
+                hi[a] = hi[a].max(k[a]);
+            }
+        }
         let axis = (0..3)
-            .max_by(|&x, &y| (b[x + 3] - b[x]).total_cmp(&(b[y + 3] - b[y])))
+            .max_by(|&x, &y| (hi[x] - lo[x]).total_cmp(&(hi[y] - lo[y])))
             .unwrap();
-        let key = |i: &u32| -> f64 { tris[*i as usize].iter().map(|p| p[axis] as f64).sum() };
+        scratch.clear();
+        scratch.extend(ids.iter().map(|&i| (keys[i as usize][axis], i)));
         let mid = count / 2;
-        self.order[first..first + count]
-            .select_nth_unstable_by(mid, |a, c| key(a).total_cmp(&key(c)));
-        let left = self.build(tris, first, mid);
-        let right = self.build(tris, first + mid, count - mid);
+        scratch.select_nth_unstable_by(mid, |a, c| a.0.total_cmp(&c.0).then(a.1.cmp(&c.1)));
+        for (o, &(_, i)) in ids.iter_mut().zip(scratch.iter()) {
+            *o = i;
+        }
+        let left = self.build(tris, keys, scratch, first, mid);
+        let right = self.build(tris, keys, scratch, first + mid, count - mid);
+        // A node's box is its children's together.
+        let (l, r) = (self.boxes[left as usize], self.boxes[right as usize]);
+        self.boxes[node as usize] = [0, 1, 2, 3, 4, 5].map(|k| {
+            if k < 3 {
+                l[k].min(r[k])
+            } else {
+                l[k].max(r[k])
+            }
+        });
         self.nodes[node as usize] = (left, 0, right);
         node
     }

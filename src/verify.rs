@@ -94,7 +94,9 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         .chunks_exact(4)
         .map(|v| [v[0], v[1], v[2]])
         .collect();
-    positions.sort_unstable_by(|a, b| {
+    // A total order on bit patterns, so the parallel sort's result is the
+    // same whatever the number of threads.
+    positions.par_sort_unstable_by(|a, b| {
         if lex_less(*a, *b) {
             std::cmp::Ordering::Less
         } else if lex_less(*b, *a) {
@@ -111,7 +113,7 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         .collect();
     let id = |p: [f32; 3]| *lookup.get(&bits(p)).unwrap_or(&UNKNOWN);
     let caps: Vec<[u32; 3]> = caps_data
-        .chunks_exact(12)
+        .par_chunks_exact(12)
         .map(|r| {
             [
                 id([r[0], r[1], r[2]]),
@@ -136,26 +138,22 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
             let k = b.k as usize;
             let data = file.floats(b.offset, b.length);
             let ids: Vec<u32> = data
-                .chunks_exact(4)
+                .par_chunks_exact(4)
                 .map(|v| id([v[0], v[1], v[2]]))
                 .collect();
-            let mut slot_tri = Vec::with_capacity(ids.len() / (2 + k) * k);
-            let mut slot_parity = Vec::with_capacity(slot_tri.capacity());
-            for r in ids.chunks_exact(2 + k) {
-                for &o in &r[2..] {
-                    let (key, p) = sort_ids([r[0], r[1], o]);
-                    match by_corners.get(&key) {
-                        Some(&(t, q)) => {
-                            slot_tri.push(t);
-                            slot_parity.push(p * q);
+            // Per slot, in order (rayon's collect keeps it).
+            let (slot_tri, slot_parity): (Vec<u32>, Vec<i8>) = ids
+                .par_chunks_exact(2 + k)
+                .flat_map_iter(|r| {
+                    r[2..].iter().map(|&o| {
+                        let (key, p) = sort_ids([r[0], r[1], o]);
+                        match by_corners.get(&key) {
+                            Some(&(t, q)) => (t, p * q),
+                            None => (UNKNOWN, 0),
                         }
-                        None => {
-                            slot_tri.push(UNKNOWN);
-                            slot_parity.push(0);
-                        }
-                    }
-                }
-            }
+                    })
+                })
+                .unzip();
             DecodedBucket {
                 k,
                 data,
@@ -263,15 +261,19 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
         }
     }
     // (a, b, o) triples from the caps.
-    let mut caps: Vec<[u32; 3]> = Vec::with_capacity(d.caps.len() * 3);
-    for t in &d.caps {
-        for e in 0..3 {
-            let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
-            caps.push([p.min(q), p.max(q), o]);
-        }
-    }
-    sides.sort_unstable();
-    caps.sort_unstable();
+    let mut caps: Vec<[u32; 3]> = d
+        .caps
+        .par_iter()
+        .flat_map_iter(|t| {
+            (0..3).map(|e| {
+                let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+                [p.min(q), p.max(q), o]
+            })
+        })
+        .collect();
+    // Both sorted by the whole triple: equal triples are identical, so the
+    // parallel sorts give the same order whatever the number of threads.
+    rayon::join(|| sides.par_sort_unstable(), || caps.par_sort_unstable());
     // Merge: count entries present on one side only (multiset difference).
     let (mut i, mut j) = (0, 0);
     while i < sides.len() || j < caps.len() {
@@ -820,9 +822,29 @@ pub fn verify_with<L: Copy + Into<VerifyLight> + Sync>(
     light_done: &(dyn Fn() + Sync),
 ) -> VerifyReport {
     let start = std::time::Instant::now();
-    let decoded: Vec<Decoded> = (0..file.header.meshes.len())
+    let mut rep = verify_decoded(&decode_all(file), lights, strategy, samples, light_done);
+    rep.time_ms = start.elapsed().as_secs_f64() * 1e3;
+    rep
+}
+
+/// Every mesh of `file` decoded ([`decode`]), in order.
+pub fn decode_all(file: &SvpkFile) -> Vec<Decoded> {
+    (0..file.header.meshes.len())
         .map(|i| decode(file, i))
-        .collect();
+        .collect()
+}
+
+/// [`verify_with`] on meshes already decoded ([`decode_all`]): a caller
+/// that also needs them (to choose lights) decodes once. `time_ms` covers
+/// this call only.
+pub fn verify_decoded<L: Copy + Into<VerifyLight> + Sync>(
+    decoded: &[Decoded],
+    lights: &[L],
+    strategy: Strategy,
+    samples: usize,
+    light_done: &(dyn Fn() + Sync),
+) -> VerifyReport {
+    let start = std::time::Instant::now();
     let mut rep = VerifyReport {
         ok: true,
         meshes: decoded.len() as u64,
@@ -844,19 +866,27 @@ pub fn verify_with<L: Copy + Into<VerifyLight> + Sync>(
         lights: Vec::new(),
         time_ms: 0.0,
     };
-    for d in &decoded {
-        let s = check_structure(d);
+    // Check 1 beside the shadow-truth index (only needed when samples are
+    // asked for): independent, and each mostly one thread's work.
+    let (structures, indexes): (
+        Vec<StructureReport>,
+        Vec<Option<crate::shadow::ShadowIndex>>,
+    ) = rayon::join(
+        || decoded.iter().map(check_structure).collect(),
+        || {
+            decoded
+                .iter()
+                .map(|d| (samples > 0).then(|| crate::shadow::ShadowIndex::new(d)))
+                .collect()
+        },
+    );
+    for s in structures {
         rep.bijection_errors += s.bijection_errors;
         rep.record_errors += s.record_errors;
         if rep.first_problem.is_none() {
             rep.first_problem = s.first_problem;
         }
     }
-    // The shadow-truth index is only needed when samples are asked for.
-    let indexes: Vec<Option<crate::shadow::ShadowIndex>> = decoded
-        .iter()
-        .map(|d| (samples > 0).then(|| crate::shadow::ShadowIndex::new(d)))
-        .collect();
     let points: Vec<Vec<[f32; 3]>> = decoded
         .iter()
         .map(|d| crate::shadow::choose_samples(d, samples, 1))
@@ -876,14 +906,7 @@ pub fn verify_with<L: Copy + Into<VerifyLight> + Sync>(
                 .expect("no panics while held")
                 .pop()
                 .unwrap_or_else(|| decoded.iter().map(|_| Default::default()).collect());
-            let out = check_light(
-                &decoded,
-                &indexes,
-                &points,
-                &mut evs,
-                given.into(),
-                strategy,
-            );
+            let out = check_light(decoded, &indexes, &points, &mut evs, given.into(), strategy);
             spare.lock().expect("no panics while held").push(evs);
             light_done();
             out
