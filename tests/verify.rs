@@ -358,7 +358,9 @@ fn closedness_by_sorting(
 /// exactly what sorting every edge counts: on the hard cases and real
 /// models (open, non-manifold), under the reference (no violations), Kim's
 /// evaluator (cracks) and evaluations with signs flipped at random (many
-/// unbalanced edges, some at infinity), with one scratch reused throughout.
+/// unbalanced edges, some at infinity), with one scratch reused throughout;
+/// lights include far ones, under which many positions share a point at
+/// infinity.
 #[test]
 fn closedness_counts_what_sorting_every_edge_counts() {
     use svpack::verify::{ClosednessScratch, check_closedness_with, choose_lights};
@@ -367,11 +369,34 @@ fn closedness_counts_what_sorting_every_edge_counts() {
     let mut scratch = ClosednessScratch::default();
     let mut flips = 0x9E37_79B9_7F4A_7C15u64;
     let mut unbalanced = 0;
+    let mut far_merged = 0;
     for input in inputs {
         let out = tmp.path().join("x.svpk");
         svpack::build::build_file(&input, &out, &Default::default()).unwrap();
         let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
-        for light in choose_lights(&d, 12, 3) {
+        // Also point lights so far away along x, or along y and z, that many
+        // positions extrude to one point at infinity, not all of them next
+        // to each other in position order.
+        let (lo, hi) = svpack::build::bounds(&d.positions);
+        let size = (0..3).map(|k| hi[k] - lo[k]).fold(1e-3f32, f32::max);
+        let far = [
+            [lo[0] + 3e7 * size, 0.5 * (lo[1] + hi[1]), hi[2], 1.0],
+            [hi[0], lo[1] - 2e7 * size, hi[2] + 5e7 * size, 1.0],
+        ];
+        for light in far {
+            let mut extruded: Vec<[u32; 3]> = d
+                .positions
+                .iter()
+                .map(|&p| {
+                    let q = svpack::multiplicity::to_infinity(p, light);
+                    [0, 1, 2].map(|k| if q[k] == 0.0 { 0 } else { q[k].to_bits() })
+                })
+                .collect();
+            extruded.sort_unstable();
+            extruded.dedup();
+            far_merged += d.positions.len() - extruded.len();
+        }
+        for light in choose_lights(&d, 12, 3).into_iter().chain(far) {
             for s in [Strategy::Reference, Strategy::Kim] {
                 let mut ev = evaluate(&d, light, s);
                 for flip in [false, true] {
@@ -396,6 +421,10 @@ fn closedness_counts_what_sorting_every_edge_counts() {
     assert!(
         unbalanced > 1000,
         "the flips must unbalance edges: {unbalanced}"
+    );
+    assert!(
+        far_merged > 1000,
+        "far lights must merge points at infinity: {far_merged}"
     );
 }
 
