@@ -206,11 +206,74 @@ fn report_lists_files_largest_first_with_size_comparisons() {
 /// threads, and a file that passes the independent read-back.
 #[test]
 fn large_build_is_thread_independent_and_reads_back() {
-    use std::fmt::Write;
     let tmp = tempfile::tempdir().unwrap();
     // A 160 × 160 grid (51,200 triangles, 25,921 vertices, ~77k edges) plus
     // fins on every 7th grid edge: non-manifold edges scattered over blocks.
-    let n = 160;
+    let input = tmp.path().join("grid.obj");
+    std::fs::write(&input, grid_with_fins(160)).unwrap();
+    let mut files = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let out = tmp.path().join(format!("g{threads}.svpk"));
+        common::svpack()
+            .args(["build", "--threads", threads, "-o"])
+            .arg(&out)
+            .arg(&input)
+            .assert()
+            .code(0);
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert!(files.iter().all(|f| *f == files[0]));
+    readback::check_file(&tmp.path().join("g2.svpk"), &input);
+}
+
+/// `--compress` runs zstd with as many workers as threads: the frame is the
+/// same bytes for 1, 2 and 3 threads, on a file of several zstd jobs, and
+/// holds exactly the uncompressed build.
+#[test]
+fn compressed_build_is_thread_independent() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("grid.obj");
+    std::fs::write(&input, grid_with_fins(220)).unwrap();
+    let plain = tmp.path().join("plain.svpk");
+    common::svpack()
+        .args(["build", "-o"])
+        .arg(&plain)
+        .arg(&input)
+        .assert()
+        .code(0);
+    let plain = std::fs::read(&plain).unwrap();
+    // Several 4 MiB jobs.
+    assert!(plain.len() > 12 << 20, "{}", plain.len());
+    let mut files = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let out = tmp.path().join(format!("z{threads}.svpk"));
+        common::svpack()
+            .args(["build", "--compress", "--threads", threads, "-o"])
+            .arg(&out)
+            .arg(&input)
+            .assert()
+            .code(0);
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert!(files.iter().all(|f| *f == files[0]), "frames differ");
+    assert!(files[0].len() * 3 < plain.len());
+    // The same container but for the header's record of `--compress` (and
+    // its checksum): a few bytes near the start.
+    let inner = zstd::decode_all(&files[0][..]).unwrap();
+    assert_eq!(inner.len(), plain.len());
+    let differ: Vec<usize> = (0..plain.len()).filter(|&i| inner[i] != plain[i]).collect();
+    assert!(
+        differ.len() <= 8 && differ.iter().all(|&i| i < 4096),
+        "{:?}",
+        &differ[..differ.len().min(20)]
+    );
+}
+
+/// An OBJ grid of `n` × `n` squares, two triangles each, with a fin on
+/// every 7th square's first edge (non-manifold edges scattered over the
+/// parallel blocks).
+fn grid_with_fins(n: usize) -> String {
+    use std::fmt::Write;
     let mut s = String::new();
     for j in 0..=n {
         for i in 0..=n {
@@ -230,19 +293,5 @@ fn large_build_is_thread_independent_and_reads_back() {
             }
         }
     }
-    let input = tmp.path().join("grid.obj");
-    std::fs::write(&input, s).unwrap();
-    let mut files = Vec::new();
-    for threads in ["1", "2", "3"] {
-        let out = tmp.path().join(format!("g{threads}.svpk"));
-        common::svpack()
-            .args(["build", "--threads", threads, "-o"])
-            .arg(&out)
-            .arg(&input)
-            .assert()
-            .code(0);
-        files.push(std::fs::read(&out).unwrap());
-    }
-    assert!(files.iter().all(|f| *f == files[0]));
-    readback::check_file(&tmp.path().join("g2.svpk"), &input);
+    s
 }
