@@ -354,8 +354,9 @@ fn closedness_by_sorting(
     rep
 }
 
-/// The linear closedness check (counting sort by the smaller vertex) counts
-/// exactly what sorting every edge counts: on the hard cases and real
+/// The linear closedness check (counting sort by the smaller vertex) and the
+/// indexed one (pairs numbered once per file) count exactly what sorting
+/// every edge counts: on the hard cases and real
 /// models (open, non-manifold), under the reference (no violations), Kim's
 /// evaluator (cracks) and evaluations with signs flipped at random (many
 /// unbalanced edges, some at infinity), with one scratch reused throughout;
@@ -363,7 +364,10 @@ fn closedness_by_sorting(
 /// infinity.
 #[test]
 fn closedness_counts_what_sorting_every_edge_counts() {
-    use svpack::verify::{ClosednessScratch, check_closedness_with, choose_lights};
+    use svpack::verify::{
+        ClosednessIndex, ClosednessScratch, check_closedness_indexed, check_closedness_with,
+        choose_lights,
+    };
     let tmp = tempfile::tempdir().unwrap();
     let inputs = hard_cases_and(tmp.path(), &["chair_model.obj", "stanford-bunny.obj"]);
     let mut scratch = ClosednessScratch::default();
@@ -374,6 +378,7 @@ fn closedness_counts_what_sorting_every_edge_counts() {
         let out = tmp.path().join("x.svpk");
         svpack::build::build_file(&input, &out, &Default::default()).unwrap();
         let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+        let index = ClosednessIndex::new(&d);
         // Also point lights so far away along x, or along y and z, that many
         // positions extrude to one point at infinity, not all of them next
         // to each other in position order.
@@ -413,6 +418,13 @@ fn closedness_counts_what_sorting_every_edge_counts() {
                     let want = closedness_by_sorting(&d, light, &ev);
                     let got = check_closedness_with(&d, light, &ev, &mut scratch);
                     assert_eq!(got, want, "{} {s:?} {light:?} flip {flip}", input.display());
+                    let got = check_closedness_indexed(&d, &index, light, &ev, &mut scratch);
+                    assert_eq!(
+                        got,
+                        want,
+                        "indexed: {} {s:?} {light:?} flip {flip}",
+                        input.display()
+                    );
                     unbalanced += want.violations;
                 }
             }
@@ -441,7 +453,13 @@ fn closedness_survives_records_naming_unknown_positions() {
         .unwrap();
     let k = d.buckets[b].k;
     d.buckets[b].ids[r * (2 + k)] = svpack::verify::UNKNOWN;
-    assert!(check_closedness(&d, light, &ev).violations > 0);
+    let general = check_closedness(&d, light, &ev);
+    assert!(general.violations > 0);
+    // The indexed check leaves such a file to the general one.
+    let index = svpack::verify::ClosednessIndex::new(&d);
+    let indexed =
+        svpack::verify::check_closedness_indexed(&d, &index, light, &ev, &mut Default::default());
+    assert_eq!(indexed, general);
 }
 
 #[test]
