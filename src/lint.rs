@@ -461,12 +461,20 @@ fn seam_checks(
 
     // (a) Signed zeros: referenced input vertices grouped by canonical bits;
     //     a group with two different raw bit patterns is a seam build welds.
+    //     Only positions with a zero coordinate can be in such a group (all
+    //     of a group's members share its canonical bits, which differ from
+    //     the raw ones only for -0.0), so only those are sorted: on the
+    //     dragon, none of 2.6 million corners, whose sort was a quarter of
+    //     `lint`'s time.
     let mut signed_zero = 0u64;
     {
         // (canonical bits, raw bits, finite triangle index)
-        let mut recs: Vec<([u32; 3], [u32; 3], u32)> = Vec::with_capacity(finite_indices.len());
+        let mut recs: Vec<([u32; 3], [u32; 3], u32)> = Vec::new();
         for (i, &v) in finite_indices.iter().enumerate() {
             let p = soup.positions[v as usize];
+            if !p.contains(&0.0) {
+                continue;
+            }
             recs.push((
                 p.map(|x| canonical(x).to_bits()),
                 p.map(f32::to_bits),

@@ -718,7 +718,7 @@ fn infinity_ids(
 /// strictly increasing) goes to the general check.
 ///
 /// At infinity the pairs are those of the positions' points, which a light
-/// may merge ([`infinity_ids`]). When every position has its own point, the
+/// may merge (`infinity_ids`). When every position has its own point, the
 /// back caps and the A∞–B∞ edges join the same pairs as the front caps and
 /// the A–B edges, each with the opposite direction (a back cap is its front
 /// cap reversed at infinity; a side quad runs B → A and A∞ → B∞ for m > 0,

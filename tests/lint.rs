@@ -368,6 +368,29 @@ fn unwelded_seam_signed_zero() {
     assert!([0, 1, 2].contains(&f.examples[0].triangle));
 }
 
+/// The same seam on a vertex with one zero coordinate only, (1, ±0, 2):
+/// the check looks at every vertex with a zero coordinate, not only at the
+/// origin.
+#[test]
+fn unwelded_seam_signed_zero_in_one_coordinate() {
+    let mut pos: Vec<[f32; 3]> = TET_POS
+        .iter()
+        .map(|p| [p[0] + 1.0, p[1], p[2] + 2.0])
+        .collect();
+    let at = pos.iter().position(|p| p[1] == 0.0 && p[0] != 0.0).unwrap();
+    let mut flipped = pos[at];
+    flipped[1] = -0.0;
+    pos.push(flipped);
+    let mut idx = TET_IDX.to_vec();
+    let corner = idx.iter().position(|&i| i as usize == at).unwrap();
+    idx[corner] = 4;
+    let f = lint_soup("t", &soup(pos, idx), 5);
+    let f = only(&f, "unwelded-seam", 1);
+    let p = &f.examples[0].positions;
+    assert_ne!(p[0][1].to_bits(), p[1][1].to_bits());
+    assert_eq!(p[0], p[1]);
+}
+
 fn tet_at(dx: f32) -> (Vec<[f32; 3]>, Vec<u32>) {
     let mut pos = TET_POS.to_vec();
     pos.extend(TET_POS.iter().map(|p| [p[0] + dx, p[1], p[2]]));
