@@ -444,6 +444,16 @@ mod tests {
         [x as f64, y as f64, z as f64, 0.0]
     }
 
+    /// Marsaglia's xorshift64 from `seed` (non-zero): reproducible inputs.
+    fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        }
+    }
+
     #[test]
     fn determinant_signs() {
         // orient of a unit tetrahedron, both orders.
@@ -474,13 +484,7 @@ mod tests {
     /// nearly, after rounding), with a zero determinant among them.
     #[test]
     fn reduction_agrees_with_the_general_sum() {
-        let mut x = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x2545_F491_4F6C_DD1D);
         let coord = |n: u64| -> f32 {
             match n % 5 {
                 0 | 1 => ((n >> 8) % 7) as f32 - 3.0,
@@ -573,17 +577,12 @@ mod tests {
     /// The filter in front of [`meet`] against the exact path alone, on
     /// 200,000 segments and rays: random ones (most pass beside, which the
     /// filter must answer), ones starting on the triangle, and ones aimed
-    /// at a corner, an edge's midpoint or the plane, exactly and one ulp off, at coordinates of mixed
-    /// magnitudes where f64 rounding is large against the determinants.
+    /// at a corner, an edge's midpoint or the plane, exactly and one ulp
+    /// off, at coordinates of mixed magnitudes where f64 rounding is large
+    /// against the determinants.
     #[test]
     fn filter_agrees_with_the_exact_path() {
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
         let coord = |n: u64| -> f32 {
             match n % 4 {
                 0 => ((n >> 8) % 9) as f32 - 4.0,
