@@ -94,8 +94,9 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         .chunks_exact(4)
         .map(|v| [v[0], v[1], v[2]])
         .collect();
-    // A total order on bit patterns, so the parallel sort's result is the
-    // same whatever the number of threads.
+    // On the pool. rayon's parallel sort splits by the data, not by the
+    // thread count, so the order is the same whatever the number of
+    // threads (finite positions are totally ordered: floats, then bits).
     positions.par_sort_unstable_by(|a, b| {
         if lex_less(*a, *b) {
             std::cmp::Ordering::Less
