@@ -275,7 +275,7 @@ pub struct ShadowReport {
 /// [`passes_beside`] with slack for the exact extrusions. Side triangles
 /// reach far (a corner at infinity makes their projection unbounded), so
 /// the coarse filter alone left about 12,000 candidates per sample on the
-/// 871k-triangle dragon, each an exact test, and about 30M grid entries
+/// 871k-triangle dragon, each an exact test, and 13M to 38M grid entries
 /// per light to build (sides in cells; bucketing the samples instead keeps
 /// the grid at one entry per sample).
 struct SideCandidates {
