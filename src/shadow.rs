@@ -588,36 +588,12 @@ pub fn check_shadow(
         let Some(back) = *back_terms[exact as usize][k].get_or_init(|| {
             // Back caps meet the ray only at its end at infinity, where
             // the answer does not depend on P: any finite point will do.
-            let origin = [0.0, 0.0, 0.0, 1.0];
             let mut sum = 0;
-            let mut add = |m: Meet| match m {
-                Meet::Cross(sg) => {
-                    sum += sg;
-                    true
-                }
-                Meet::None => true,
-                _ => false,
-            };
-            if exact {
-                for e in backs() {
-                    if !add(meet_e(origin, &e)) {
-                        return None;
-                    }
-                }
-            } else {
-                // The emitted caps straight from the triangles, with no
-                // exact corners and no usability test (every back cap of
-                // the emitted volume is visited, once per light and
-                // direction): `meet` answers `None` for an unusable one,
-                // as it would be left out (see `usable`).
-                for (t, &c) in index.tris.iter().zip(&ev.caps) {
-                    if c == 0 {
-                        continue;
-                    }
-                    let (p0, p1) = if c < 0 { (t[1], t[0]) } else { (t[0], t[1]) };
-                    if !add(meet(origin, dh, [inf(t[2]), inf(p1), inf(p0)])) {
-                        return None;
-                    }
+            for e in backs() {
+                match meet_e([0.0, 0.0, 0.0, 1.0], &e) {
+                    Meet::Cross(sg) => sum += sg * e.weight,
+                    Meet::None => {}
+                    _ => return None,
                 }
             }
             Some(sum)

@@ -584,45 +584,46 @@ impl ClosednessIndex {
         if unknown_cap || unknown_record || d.indexed.is_none() {
             return ClosednessIndex::default();
         }
-        // (pair key, occurrence): caps' edges first, then records.
+        // (pair key, occurrence with REVERSED set when the edge runs from
+        // the larger id): caps' edges first, then records.
         let cap_edges = 3 * d.caps.len();
-        let key = |x: u32, y: u32| ((x.min(y) as u64) << 32) | x.max(y) as u64;
+        assert!(
+            cap_edges + d.buckets.iter().map(|b| b.records()).sum::<usize>() < REVERSED as usize,
+            "verify: 2^31 drawn pairs or more"
+        );
+        let entry = |x: u32, y: u32, o: usize| {
+            let key = ((x.min(y) as u64) << 32) | x.max(y) as u64;
+            (key, o as u32 | if x > y { REVERSED } else { 0 })
+        };
         let mut occ: Vec<(u64, u32)> = d
             .caps
             .par_iter()
             .enumerate()
-            .flat_map_iter(|(t, c)| {
-                (0..3).map(move |e| (key(c[e], c[(e + 1) % 3]), (3 * t + e) as u32))
-            })
+            .flat_map_iter(|(t, c)| (0..3).map(move |e| entry(c[e], c[(e + 1) % 3], 3 * t + e)))
             .collect();
-        let mut r = cap_edges as u32;
+        let mut r = cap_edges;
         for b in &d.buckets {
             for ids in b.ids.chunks_exact(2 + b.k) {
-                occ.push((key(ids[0], ids[1]), r));
+                occ.push(entry(ids[0], ids[1], r));
                 r += 1;
             }
         }
         occ.par_sort_unstable();
         let mut cap_pairs = vec![[COLLAPSED; 3]; d.caps.len()];
-        let mut record_pairs = vec![COLLAPSED; r as usize - cap_edges];
+        let mut record_pairs = vec![COLLAPSED; r - cap_edges];
         let mut pair_keys = Vec::new();
         for run in occ.chunk_by(|a, b| a.0 == b.0) {
-            let (x, y) = ((run[0].0 >> 32) as u32, run[0].0 as u32);
-            if x == y {
-                continue; // stays COLLAPSED
+            if run[0].0 >> 32 == run[0].0 & 0xFFFF_FFFF {
+                continue; // one position: stays COLLAPSED
             }
             let n = pair_keys.len() as u32;
             pair_keys.push(run[0].0);
             for &(_, o) in run {
-                let o = o as usize;
-                if o < cap_edges {
-                    let (t, e) = (o / 3, o % 3);
-                    let from = d.caps[t][e];
-                    cap_pairs[t][e] = n | if from == y { REVERSED } else { 0 };
+                let (at, flag) = ((o & !REVERSED) as usize, o & REVERSED);
+                if at < cap_edges {
+                    cap_pairs[at / 3][at % 3] = n | flag;
                 } else {
-                    let r = o - cap_edges;
-                    let from = record_a(d, r);
-                    record_pairs[r] = n | if from == y { REVERSED } else { 0 };
+                    record_pairs[at - cap_edges] = n | flag;
                 }
             }
         }
@@ -633,18 +634,6 @@ impl ClosednessIndex {
             usable: true,
         }
     }
-}
-
-/// The A id of record `r` counted over all buckets in order.
-fn record_a(d: &Decoded, mut r: usize) -> u32 {
-    for b in &d.buckets {
-        let n = b.ids.len() / (2 + b.k);
-        if r < n {
-            return b.ids[r * (2 + b.k)];
-        }
-        r -= n;
-    }
-    unreachable!("record index within the buckets")
 }
 
 /// How the points at infinity of one light relate to the positions.
