@@ -7,11 +7,12 @@
 //! Edges are produced sorted by (a, b); each edge's opposite vertices are in
 //! triangle order. Both orders are fully determined by the input.
 //!
-//! Method: every triangle is listed (by id, 4 bytes) under the two corners
-//! that are the smaller endpoint of one of its edges, by a counting sort on
-//! the dense vertex ids; then, vertex by vertex, the listed triangles are
-//! read back and that vertex's edges sorted by larger endpoint, a handful of
-//! records on real meshes (the vertex valence). See [`build_edges`].
+//! Method: every triangle is listed (by its other two corners, 8 bytes)
+//! under the two corners that are the smaller endpoint of one of its edges,
+//! by a counting sort on the dense vertex ids; then, vertex by vertex, the
+//! listings are read back and that vertex's edges sorted by larger endpoint,
+//! a handful of records on real meshes (the vertex valence). See
+//! [`build_edges`].
 
 /// Edges in compressed-row form.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -58,8 +59,8 @@ impl Edges {
 /// Method: each triangle `lo < mid < hi` (its corners by id) is listed
 /// under the two corners that are the smaller endpoint of one of its edges:
 /// `lo` (edges lo–mid and lo–hi) and `mid` (edge mid–hi); `hi` is the
-/// smaller endpoint of none. Then, vertex by vertex in id order, the listed
-/// triangles are read back and their edges at that vertex sorted by larger
+/// smaller endpoint of none. Then, vertex by vertex in id order, the
+/// listings are read back and their edges at that vertex sorted by larger
 /// endpoint: edges come out sorted by (a, b), each with its opposite
 /// vertices in triangle order.
 ///
@@ -69,16 +70,17 @@ impl Edges {
 ///    (4 bytes per vertex) outgrow L2 on large meshes and the corners are
 ///    scattered (0.80–0.95 of the time without, dragon and 1M scene, 1 and
 ///    2 threads, in an interleaved comparison not kept in the repo).
-/// 2. **List** every triangle id under its `lo` and `mid` (4 bytes per
-///    listing: 2 per triangle, flagged for `mid`). Chunk `c` writes after
-///    chunks `0..c` in every vertex's list, so lists are in triangle order
-///    whatever the number of chunks.
+/// 2. **List** every triangle under its `lo` and `mid` by the pair of its
+///    other two corners: `[mid, hi]` under `lo`, `[hi, lo]` under `mid`
+///    (8 bytes per listing, 2 per triangle; the pair's order tells the two
+///    kinds apart), and with `opp_tri` also its id in a second list. Chunk
+///    `c` writes after chunks `0..c` in every vertex's list, so lists are in
+///    triangle order whatever the number of chunks.
 /// 3. **Emit**, one group of consecutive vertices per thread (groups cut at
 ///    multiples of `RANGE` vertices so they hold about equal numbers of
 ///    records, counted per range in pass 1): a vertex's listings are read in
-///    order and their triangles gathered (prefetched `AHEAD` listings
-///    ahead: the triangle table is larger than L2 and the ids are
-///    scattered; without it this pass waited on one miss after another), its
+///    order, each giving its edge records at that vertex (the listing, and
+///    under `lo` also the swapped pair) without reading the triangle, its
 ///    few edge records sorted by larger endpoint, stably
 ///    (`rank_sort_block`), its opposite vertices and triangles written
 ///    straight to their final place, and its edges one after the other from
@@ -89,10 +91,16 @@ impl Edges {
 /// Why not sort the 3·T half-edges themselves (the previous method, a
 /// two-level counting sort of 16-byte records, kept as a bench baseline):
 /// that writes and reads back 16 bytes per half-edge, 42 MB of fresh memory
-/// on the 871k-triangle dragon; the listing is 8 bytes per triangle (7 MB)
-/// and the gather reads a triangle table that fits in L3. On the dragon the
-/// CLI's topology stage went from 86.9 to 61.6 ms on one thread (see the
-/// README).
+/// on the 871k-triangle dragon; the listing is 16 bytes per triangle
+/// (14 MB). On the dragon the CLI's topology stage went from 86.9 to 61.6 ms
+/// on one thread (see the README).
+///
+/// Why pairs and not triangle ids (4 bytes per listing, the fourth round's
+/// method): with ids, pass 3 gathered every listed triangle from the
+/// triangle table, one scattered read per listing (1.7M on the dragon,
+/// prefetched). The pairs cost 7 MB more writes in pass 2 and turn pass 3
+/// into a sequential read: 46.5–47.6 → 42.1–42.5 ms on one thread, 26.3–28.5
+/// → 24.2–25.4 ms on two (README, "Eighth round").
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
@@ -123,10 +131,11 @@ fn chunks_for(triangles: &[u32]) -> usize {
 fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunks: usize) -> Edges {
     use rayon::prelude::*;
     let tcount = triangles.len() / 3;
-    // The listing's flag bit; 2 listings per triangle must fit in u32.
+    // Record offsets (3 per triangle) are u32.
     assert!(
-        tcount < 1 << 31,
-        "topology: {tcount} triangles, at most 2^31 - 1 supported"
+        3 * tcount <= u32::MAX as usize,
+        "topology: {tcount} triangles, at most {} supported",
+        u32::MAX / 3
     );
     let ranges = vertex_count.div_ceil(RANGE);
     let range_of = |v: u32| (v >> RANGE_SHIFT) as usize;
@@ -175,11 +184,12 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
     }
 
     // Pass 2: list each triangle under its lo and mid corners.
-    let mut list = vec![0u32; at as usize];
-    struct Out(*mut u32);
+    let mut list = vec![[0u32; 2]; at as usize];
+    let mut list_t = vec![0u32; if TRI { at as usize } else { 0 }];
+    struct Out(*mut [u32; 2], *mut u32);
     // SAFETY: shared only to write disjoint slots, see below.
     unsafe impl Sync for Out {}
-    let out = Out(list.as_mut_ptr());
+    let out = Out(list.as_mut_ptr(), list_t.as_mut_ptr());
     tri_chunks
         .par_iter()
         .zip(counts.par_iter_mut())
@@ -193,17 +203,22 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
                     }
                 }
                 let id = (ci * per + i) as u32;
-                let (lo, mid, _) = sort3(t);
+                let (lo, mid, hi) = sort3(t);
+                let (at_lo, at_mid) = (fill[lo as usize] as usize, fill[mid as usize] as usize);
                 // SAFETY: chunk `ci` owns, for each vertex v, the slots
                 // fill[v] .. fill[v] + (its count of v), which pass 1
                 // counted exactly; these are disjoint across chunks and
-                // vertices and lie inside `list`.
+                // vertices and lie inside `list` (and `list_t` when TRI).
                 unsafe {
-                    out.0.add(fill[lo as usize] as usize).write(id);
-                    fill[lo as usize] += 1;
-                    out.0.add(fill[mid as usize] as usize).write(id | MID);
-                    fill[mid as usize] += 1;
+                    out.0.add(at_lo).write([mid, hi]);
+                    out.0.add(at_mid).write([hi, lo]);
+                    if TRI {
+                        out.1.add(at_lo).write(id);
+                        out.1.add(at_mid).write(id);
+                    }
                 }
+                fill[lo as usize] += 1;
+                fill[mid as usize] += 1;
             }
         });
     drop(counts);
@@ -259,31 +274,27 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
                 let base = rec_start[group_start[g]] as u32;
                 let mut small = [[0u32; 4]; SMALL_RUN];
                 for v in first..last {
-                    let listed = &list[start[v] as usize..start[v + 1] as usize];
+                    let (from, to) = (start[v] as usize, start[v + 1] as usize);
+                    let listed = &list[from..to];
                     // Two record slots per listing, plus the block padding.
                     let need = 2 * listed.len() + SMALL_RUN;
                     if buf.len() < need {
                         buf.resize(need, [0; 4]);
                     }
                     let mut k = 0;
-                    for (j, &x) in listed.iter().enumerate() {
-                        let ahead = start[v] as usize + j + AHEAD;
-                        if let Some(&y) = list.get(ahead) {
-                            crate::hint::prefetch(&triangles[3 * (y & !MID) as usize]);
-                        }
-                        let t = x & !MID;
-                        let (lo, mid, hi) = sort3(&triangles[3 * t as usize..3 * t as usize + 3]);
-                        // Records are [_, larger endpoint, opposite, triangle].
-                        // Listed under mid: one record (mid–hi, opposite lo);
-                        // under lo: two (lo–mid opposite hi, lo–hi opposite
-                        // mid). Both write two slots, without a branch (the
-                        // kinds alternate unpredictably); a mid listing's
-                        // second slot is overwritten by the next record.
-                        let is_mid = x >> 31;
-                        let m = is_mid.wrapping_neg();
-                        buf[k] = [0, (hi & m) | (mid & !m), (lo & m) | (hi & !m), t];
-                        buf[k + 1] = [0, hi, mid, t];
-                        k += 2 - is_mid as usize;
+                    for (j, &[p, q]) in listed.iter().enumerate() {
+                        // Records are [_, larger endpoint, opposite, order]:
+                        // the listing itself, and when it was listed under
+                        // lo (p < q) also its swap. Both slots are written
+                        // without a branch (the kinds alternate
+                        // unpredictably); a mid listing's second slot is
+                        // overwritten by the next record. `order` is the
+                        // triangle, or without TRI the listing's rank,
+                        // which follows triangle order just the same.
+                        let order = if TRI { list_t[from + j] } else { j as u32 };
+                        buf[k] = [0, p, q, order];
+                        buf[k + 1] = [0, q, p, order];
+                        k += 1 + usize::from(p < q);
                     }
                     // By larger endpoint, then triangle: the listings are in
                     // triangle order and a triangle has one record per larger
@@ -321,6 +332,7 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
         )
         .collect();
     drop(list);
+    drop(list_t);
 
     // Pass 4: each group's edges moved down to follow the previous groups'
     // (in order, so a move never overwrites edges not yet moved).
@@ -355,11 +367,8 @@ fn sort3(t: &[u32]) -> (u32, u32, u32) {
     (lo, a ^ b ^ c ^ lo ^ hi, hi)
 }
 
-/// The flag of a triangle listed under its middle corner.
-const MID: u32 = 1 << 31;
-
-/// How far ahead [`build_edges`] prefetches: listings in the gather of pass
-/// 3, triangles in passes 1 and 2.
+/// How far ahead [`build_edges`] prefetches the counters of passes 1 and 2,
+/// in triangles.
 const AHEAD: usize = 16;
 /// Longest run of records [`rank_sort_block`] sorts.
 const SMALL_RUN: usize = 8;
@@ -413,15 +422,27 @@ pub struct EdgeStats {
 }
 
 /// Computes [`EdgeStats`].
+///
+/// The histogram is counted per block of edges in parallel and the blocks'
+/// counts summed, so it does not depend on the number of threads.
 pub fn edge_stats(edges: &Edges) -> EdgeStats {
-    let mut hist: Vec<u64> = Vec::new();
-    for e in 0..edges.len() {
-        let n = edges.fan(e);
-        if n >= hist.len() {
-            hist.resize(n + 1, 0);
-        }
-        hist[n] += 1;
-    }
+    use rayon::prelude::*;
+    // Blocks overlap by one start, so every edge is in exactly one block.
+    let starts = &edges.opp_start;
+    let blocks = edges.len().div_ceil(STATS_BLOCK);
+    let hist = (0..blocks)
+        .into_par_iter()
+        .map(|k| {
+            let end = ((k + 1) * STATS_BLOCK).min(edges.len());
+            fan_histogram(&starts[k * STATS_BLOCK..=end])
+        })
+        .reduce(Vec::new, |mut a, b| {
+            if a.len() < b.len() {
+                a.resize(b.len(), 0);
+            }
+            a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+            a
+        });
     let histogram: Vec<(u32, u64)> = hist
         .iter()
         .enumerate()
@@ -435,6 +456,47 @@ pub fn edge_stats(edges: &Edges) -> EdgeStats {
         max_fan: histogram.last().map(|h| h.0).unwrap_or(0),
         histogram,
     }
+}
+
+/// Edges per block of [`edge_stats`].
+const STATS_BLOCK: usize = 1 << 16;
+
+/// `hist[n]` = edges with `n` opposite vertices, for the edges whose ranges
+/// `starts` bounds (one start more than edges).
+///
+/// Fans of one and two (almost every edge of a real mesh) are summed as
+/// comparisons in u32 lanes, which vectorise; only a block holding another
+/// fan is walked again, with a branch per edge. Why: incrementing `hist[n]`
+/// for every edge took 2.7–3.4 ms for the dragon's 1.3M edges (each
+/// increment waits on the previous one to the same counter, through
+/// memory), and so did the same sums in u64, which did not vectorise; u32
+/// sums take 0.7–0.9 ms (one thread, the stats called a second time on the
+/// same edges; local timers, not kept).
+fn fan_histogram(starts: &[u32]) -> Vec<u64> {
+    let mut hist = vec![0u64; 3];
+    // u32 counts: a block has at most 2^16 edges.
+    let (mut one, mut two, mut rare) = (0u32, 0u32, 0u32);
+    for (&s, &e) in starts.iter().zip(&starts[1..]) {
+        let n = e.wrapping_sub(s);
+        one += u32::from(n == 1);
+        two += u32::from(n == 2);
+        rare += u32::from(n.wrapping_sub(1) >= 2);
+    }
+    if rare != 0 {
+        for (&s, &e) in starts.iter().zip(&starts[1..]) {
+            let n = (e - s) as usize;
+            // Zero and more than two.
+            if n.wrapping_sub(1) >= 2 {
+                if n >= hist.len() {
+                    hist.resize(n + 1, 0);
+                }
+                hist[n] += 1;
+            }
+        }
+    }
+    hist[1] += u64::from(one);
+    hist[2] += u64::from(two);
+    hist
 }
 
 #[cfg(test)]
@@ -557,5 +619,51 @@ mod tests {
         let s = edge_stats(&e);
         assert_eq!(s.max_fan, 4);
         assert_eq!(s.non_manifold_edges, 1);
+    }
+
+    /// The histogram against a plain count, over several blocks, with fans
+    /// of one, two and more, in any number of threads.
+    #[test]
+    fn edge_stats_match_a_plain_count() {
+        let mut bits = crate::multiplicity::test_bits(0x5851_f42d_4c95_7f2d);
+        let mut opp_start = vec![0u32];
+        for _ in 0..3 * STATS_BLOCK + 123 {
+            let r = bits() >> 58;
+            // Mostly 2, some 1, a few 3..=9.
+            let n = match r {
+                0..=44 => 2,
+                45..=58 => 1,
+                _ => 3 + (r as u32 - 59),
+            };
+            opp_start.push(opp_start.last().unwrap() + n);
+        }
+        let m = opp_start.len() - 1;
+        let e = Edges {
+            a: vec![0; m],
+            b: vec![1; m],
+            opp: vec![0; *opp_start.last().unwrap() as usize],
+            opp_start,
+            opp_tri: Vec::new(),
+        };
+        let mut plain = std::collections::BTreeMap::<u32, u64>::new();
+        for i in 0..m {
+            *plain.entry(e.fan(i) as u32).or_default() += 1;
+        }
+        let expected: Vec<(u32, u64)> = plain.into_iter().collect();
+        assert!(expected.len() >= 5, "{expected:?}");
+        for threads in 1..=3 {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let s = pool.install(|| edge_stats(&e));
+            assert_eq!(s.histogram, expected, "{threads} threads");
+            assert_eq!(s.edges, m as u64);
+            assert_eq!(s.open_edges, expected[0].1);
+            let more: u64 = expected.iter().filter(|h| h.0 > 2).map(|h| h.1).sum();
+            assert_eq!(s.non_manifold_edges, more);
+            assert_eq!(s.max_fan, expected.last().unwrap().0);
+        }
+        assert_eq!(edge_stats(&Edges::default()), EdgeStats::default());
     }
 }
