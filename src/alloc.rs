@@ -12,8 +12,8 @@
 //! those buffers by 512.
 //!
 //! Small blocks go to [`std::alloc::System`] unchanged. Blocks of at least
-//! [`HUGE_MIN`] bytes get an anonymous mapping of their own with an
-//! `madvise(MADV_HUGEPAGE)` hint. The hint never changes what the program
+//! [`HUGE_MIN`] bytes get an anonymous mapping of their own, a whole number
+//! of huge pages long, with an `madvise(MADV_HUGEPAGE)` hint. The hint never changes what the program
 //! computes, and a kernel without THP ignores it. On other systems the
 //! allocator is exactly `System`.
 //!
@@ -39,6 +39,23 @@ const PAGE: usize = 4096;
 /// `mremap`, which moves page tables instead of bytes.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct HugePageAlloc;
+
+/// The length of the mapping that holds a large block of `size` bytes: the
+/// next multiple of [`HUGE_MIN`].
+///
+/// Why: Linux places a mapping on a huge-page boundary only when its length
+/// is a multiple of the huge-page size, and backs with huge pages only the
+/// whole aligned 2 MiB ranges inside it. A 3.5 MiB buffer got one huge
+/// page and 384 small ones (`AnonHugePages` in `/proc/self/smaps`, kernel
+/// 6.18); rounded up to 4 MiB it gets two. On the dragon the weld and
+/// topology stages allocate a dozen buffers of 2–14 MiB, so most of their
+/// first touches were small-page faults (README, "Eighth round"). The cost
+/// is address space, and at most the zeroing of one huge page per buffer
+/// where a buffer's tail reaches into it.
+#[inline]
+fn span(size: usize) -> usize {
+    size.next_multiple_of(HUGE_MIN)
+}
 
 #[inline]
 fn is_large(size: usize, align: usize) -> bool {
@@ -117,7 +134,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     #[inline]
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if is_large(layout.size(), layout.align()) {
-            sys::map(layout.size())
+            sys::map(span(layout.size()))
         } else {
             // SAFETY: the caller's contract.
             unsafe { System.alloc(layout) }
@@ -128,7 +145,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         if is_large(layout.size(), layout.align()) {
             // Fresh anonymous mappings are zero.
-            sys::map(layout.size())
+            sys::map(span(layout.size()))
         } else {
             // SAFETY: the caller's contract.
             unsafe { System.alloc_zeroed(layout) }
@@ -139,7 +156,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         if is_large(layout.size(), layout.align()) {
             // SAFETY: large blocks are mappings of exactly this size.
-            unsafe { sys::unmap(ptr, layout.size()) }
+            unsafe { sys::unmap(ptr, span(layout.size())) }
         } else {
             // SAFETY: the caller's contract.
             unsafe { System.dealloc(ptr, layout) }
@@ -150,7 +167,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
         let align = layout.align();
         match (is_large(layout.size(), align), is_large(new_size, align)) {
             // SAFETY: a mapping of exactly `layout.size()` bytes.
-            (true, true) => unsafe { sys::remap(ptr, layout.size(), new_size) },
+            (true, true) => unsafe { sys::remap(ptr, span(layout.size()), span(new_size)) },
             // SAFETY: the caller's contract.
             (false, false) => unsafe { System.realloc(ptr, layout, new_size) },
             _ => {
@@ -194,6 +211,43 @@ mod tests {
                 assert!(s.iter().all(|&b| b == 7), "realloc kept the contents");
                 a.dealloc(q, Layout::from_size_align(size * 2, 64).unwrap());
             }
+        }
+    }
+
+    #[test]
+    fn large_mappings_are_whole_huge_pages() {
+        assert_eq!(span(HUGE_MIN), HUGE_MIN);
+        assert_eq!(span(HUGE_MIN + 1), 2 * HUGE_MIN);
+        assert_eq!(span(7 * HUGE_MIN / 2), 4 * HUGE_MIN);
+        // Resizing within one span, and across spans, keeps the contents
+        // and the block usable up to its new size.
+        let a = HugePageAlloc;
+        let size = 5 * HUGE_MIN / 2;
+        let layout = Layout::from_size_align(size, 8).unwrap();
+        unsafe {
+            let p = a.alloc(layout);
+            assert!(!p.is_null());
+            std::slice::from_raw_parts_mut(p, size).fill(3);
+            let grown = 3 * HUGE_MIN - 8;
+            let q = a.realloc(p, layout, grown);
+            assert!(std::slice::from_raw_parts(q, size).iter().all(|&b| b == 3));
+            std::slice::from_raw_parts_mut(q, grown)[size..].fill(4);
+            let shrunk = HUGE_MIN + 100;
+            let r = a.realloc(q, Layout::from_size_align(grown, 8).unwrap(), shrunk);
+            assert!(
+                std::slice::from_raw_parts(r, shrunk)
+                    .iter()
+                    .all(|&b| b == 3)
+            );
+            let big = 9 * HUGE_MIN + 1;
+            let w = a.realloc(r, Layout::from_size_align(shrunk, 8).unwrap(), big);
+            assert!(
+                std::slice::from_raw_parts(w, shrunk)
+                    .iter()
+                    .all(|&b| b == 3)
+            );
+            std::slice::from_raw_parts_mut(w, big)[big - 1] = 5;
+            a.dealloc(w, Layout::from_size_align(big, 8).unwrap());
         }
     }
 }
