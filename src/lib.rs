@@ -16,6 +16,7 @@ pub mod layout;
 pub mod lint;
 pub mod load;
 pub mod multiplicity;
+mod position_index;
 pub mod quantize;
 pub mod report;
 pub mod shadow;

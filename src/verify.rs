@@ -17,7 +17,9 @@
 use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
 use crate::evaluate_indexed::IndexedCaps;
 use crate::format::SvpkFile;
-use crate::multiplicity::{Light, cap_corner, lex_less, side_corner, to_infinity};
+use crate::multiplicity::{Light, cap_corner, side_corner, to_infinity};
+use crate::position_index::{PositionTable, TriangleIndex};
+use crate::weld::order_key;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -29,7 +31,10 @@ pub struct Decoded {
     pub space: crate::quantize::RecordSpace,
     /// Largest `.w` integer the encoding stores (`B.w` saturates there).
     pub w_limit: f32,
-    /// Distinct caps positions, lexicographically sorted; ids index this.
+    /// Distinct caps positions (by bits), sorted by the order keys of their
+    /// coordinates, x first: the lexicographic order of the values, with
+    /// `-0.0` just before `+0.0` and NaNs at the ends (by sign bit). Ids
+    /// index this.
     pub positions: Vec<[f32; 3]>,
     /// Caps records as floats (12 per triangle), as the GPU reads them.
     pub caps_data: Vec<f32>,
@@ -87,69 +92,56 @@ fn bits(p: [f32; 3]) -> [u32; 3] {
 }
 
 /// Decodes mesh `index` of `file`.
+///
+/// Positions are identified by their bits. The caps corners are numbered
+/// in a hash table (module `position_index`) and only the distinct
+/// positions are sorted, by the order keys of their coordinates
+/// ([`Decoded::positions`]); every sides position is then looked up in the
+/// same table, and every opposite slot's corner set in the caps triangles
+/// listed by smallest corner. Each step is in fixed blocks or sequential,
+/// so the result does not depend on the number of threads.
 pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
     let m = &file.header.meshes[index];
     let caps_data = file.floats(m.caps.offset, m.caps.length);
-    let mut positions: Vec<[f32; 3]> = caps_data
-        .chunks_exact(4)
-        .map(|v| [v[0], v[1], v[2]])
-        .collect();
-    // On the pool. rayon's parallel sort splits by the data, not by the
-    // thread count, so the order is the same whatever the number of
-    // threads (finite positions are totally ordered: floats, then bits).
-    positions.par_sort_unstable_by(|a, b| {
-        if lex_less(*a, *b) {
-            std::cmp::Ordering::Less
-        } else if lex_less(*b, *a) {
-            std::cmp::Ordering::Greater
-        } else {
-            bits(*a).cmp(&bits(*b))
-        }
-    });
-    positions.dedup_by(|a, b| bits(*a) == bits(*b));
-    let lookup: FxHashMap<[u32; 3], u32> = positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (bits(*p), i as u32))
-        .collect();
-    let id = |p: [f32; 3]| *lookup.get(&bits(p)).unwrap_or(&UNKNOWN);
-    let caps: Vec<[u32; 3]> = caps_data
-        .par_chunks_exact(12)
-        .map(|r| {
-            [
-                id([r[0], r[1], r[2]]),
-                id([r[4], r[5], r[6]]),
-                id([r[8], r[9], r[10]]),
-            ]
-        })
-        .collect();
-    // Each triangle once, keyed by its sorted corner ids, with the parity of
-    // the sort (duplicates of a corner set: any of them gives the same sign).
-    let mut by_corners: FxHashMap<[u32; 3], (u32, i8)> = FxHashMap::default();
-    for (t, c) in caps.iter().enumerate() {
-        let (key, parity) = sort_ids(*c);
-        if key[0] != key[1] && key[1] != key[2] && key[2] != UNKNOWN {
-            by_corners.entry(key).or_insert((t as u32, parity));
-        }
+    let key = |d: &[f32], i: usize| bits([d[4 * i], d[4 * i + 1], d[4 * i + 2]]);
+    // The caps, first in first-occurrence numbers, renumbered in place.
+    let mut caps = vec![[0u32; 3]; caps_data.len() / 12];
+    let (mut table, distinct) =
+        PositionTable::number(|i| key(&caps_data, i), bytemuck::cast_slice_mut(&mut caps));
+    // Distinct bits have distinct order keys: the order is total.
+    let mut order: Vec<u32> = (0..distinct.len() as u32).collect();
+    order.par_sort_unstable_by_key(|&i| distinct[i as usize].map(|b| order_key(f32::from_bits(b))));
+    let mut rank = vec![0u32; distinct.len()];
+    for (r, &i) in order.iter().enumerate() {
+        rank[i as usize] = r as u32;
     }
+    let positions: Vec<[f32; 3]> = order
+        .iter()
+        .map(|&i| distinct[i as usize].map(f32::from_bits))
+        .collect();
+    drop((order, distinct));
+    table.renumber(&rank);
+    caps.par_iter_mut()
+        .for_each(|c| *c = c.map(|i| rank[i as usize]));
+    drop(rank);
+    // Each triangle once, by its sorted corner ids, with the parity of the
+    // sort (duplicates of a corner set: any of them gives the same sign).
+    let by_corners = TriangleIndex::new(&caps, positions.len());
     let buckets = m
         .buckets
         .iter()
         .map(|b| {
             let k = b.k as usize;
             let data = file.floats(b.offset, b.length);
-            let ids: Vec<u32> = data
-                .par_chunks_exact(4)
-                .map(|v| id([v[0], v[1], v[2]]))
-                .collect();
+            let ids = table.ids(data.len() / 4, |i| key(&data, i));
             // Per slot, in order (rayon's collect keeps it).
             let (slot_tri, slot_parity): (Vec<u32>, Vec<i8>) = ids
                 .par_chunks_exact(2 + k)
                 .flat_map_iter(|r| {
                     r[2..].iter().map(|&o| {
                         let (key, p) = sort_ids([r[0], r[1], o]);
-                        match by_corners.get(&key) {
-                            Some(&(t, q)) => (t, p * q),
+                        match by_corners.get(key) {
+                            Some((t, q)) => (t, p * q),
                             None => (UNKNOWN, 0),
                         }
                     })

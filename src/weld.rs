@@ -51,7 +51,7 @@ pub fn canonical(v: f32) -> f32 {
 /// signs of mesh coordinates are close to random, and a branch here
 /// mispredicted on every other vertex.
 #[inline(always)]
-fn order_key(v: f32) -> u32 {
+pub(crate) fn order_key(v: f32) -> u32 {
     let b = v.to_bits();
     b ^ (((b as i32 >> 31) as u32) | 0x8000_0000)
 }

@@ -511,3 +511,107 @@ fn shared_evaluation_equals_per_record_evaluation() {
         }
     }
 }
+
+/// Caps corners set to `-0.0` beside `+0.0`, and to NaNs of both signs: the
+/// decoded positions are distinct by bits and in the documented total order
+/// (the earlier comparison sort had no total order with NaNs), every caps
+/// id names its corner's exact bits, and `verify` reports the damage (exit
+/// 2) instead of failing.
+#[test]
+fn signed_zeros_and_nans_decode_in_a_total_order() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let src = &fx.iter().find(|f| f.0 == "seamed_cube.obj").unwrap().1;
+    let out = tmp.path().join("odd.svpk");
+    svpack()
+        .arg("build")
+        .arg(src)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .code(0);
+    let clean = decode(&svpack::format::read_file(&out).unwrap(), 0);
+    let zero = clean
+        .positions
+        .iter()
+        .position(|p| p[0] == 0.0)
+        .expect("a corner with x = 0");
+    let bits_of = |p: [f32; 3]| p.map(f32::to_bits);
+    let zero_bits = bits_of(clean.positions[zero]);
+    patch_payload(&out, |p, h| {
+        let caps = (h.meshes[0].caps.offset - h.payload_offset) as usize;
+        let corners = h.meshes[0].caps.count as usize * 3;
+        let mut seen_zero = 0;
+        for c in 0..corners {
+            let at = caps + 16 * c;
+            let x: [u8; 4] = p[at..at + 4].try_into().unwrap();
+            let y: [u8; 4] = p[at + 4..at + 8].try_into().unwrap();
+            let z: [u8; 4] = p[at + 8..at + 12].try_into().unwrap();
+            let b = [x, y, z].map(u32::from_le_bytes);
+            // One corner at the zero position becomes -0.0 in x; two other
+            // corners become NaNs of either sign.
+            let new_x = if b == zero_bits {
+                seen_zero += 1;
+                (seen_zero == 1).then_some(0x8000_0000u32)
+            } else if c == 5 {
+                Some(0x7fc0_0001)
+            } else if c == 7 {
+                Some(0xffc0_0002)
+            } else {
+                None
+            };
+            if let Some(v) = new_x {
+                p[at..at + 4].copy_from_slice(&v.to_le_bytes());
+            }
+        }
+    });
+    let file = svpack::format::read_file(&out).unwrap();
+    let d = decode(&file, 0);
+    let key = |v: u32| v ^ ((((v as i32) >> 31) as u32) | 0x8000_0000);
+    let keys: Vec<[u32; 3]> = d.positions.iter().map(|p| bits_of(*p).map(key)).collect();
+    assert!(keys.windows(2).all(|w| w[0] < w[1]), "{:?}", d.positions);
+    assert!(d.positions[0][0].is_nan() && d.positions[0][0].is_sign_negative());
+    let last = d.positions[d.positions.len() - 1];
+    assert!(last[0].is_nan() && last[0].is_sign_positive());
+    let minus = (0..d.positions.len())
+        .find(|&i| d.positions[i][0].to_bits() == 0x8000_0000)
+        .expect("the -0.0 corner is a position of its own");
+    assert_eq!(
+        bits_of(d.positions[minus + 1]),
+        zero_bits,
+        "-0.0 just before +0.0"
+    );
+    // Every caps id names its corner's bits.
+    let caps = file.floats(
+        file.header.meshes[0].caps.offset,
+        file.header.meshes[0].caps.length,
+    );
+    for (t, ids) in d.caps.iter().enumerate() {
+        for (c, &id) in ids.iter().enumerate() {
+            let r = &caps[12 * t + 4 * c..12 * t + 4 * c + 3];
+            assert_eq!(
+                bits_of(d.positions[id as usize]),
+                bits_of([r[0], r[1], r[2]]),
+                "triangle {t} corner {c}"
+            );
+        }
+    }
+    assert!(
+        d.indexed.is_none(),
+        "a ±0.0 pair and NaNs: no sorted-id caps"
+    );
+    let r = svpack()
+        .arg("verify")
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert_eq!(
+        r.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(j["ok"], false);
+}
