@@ -744,7 +744,7 @@ pub struct SvpkFile {
     /// Version minor found in the file.
     pub version_minor: u16,
     /// The uncompressed container bytes.
-    pub bytes: Vec<u8>,
+    pub bytes: FileBytes,
     /// Whether the file on disk was zstd-wrapped.
     pub compressed: bool,
     /// Size of the file on disk.
@@ -757,12 +757,28 @@ impl SvpkFile {
         self.header.options.encoding().unwrap_or_default()
     }
 
-    /// A section's vec4s as record-space floats (copied; the byte buffer is
-    /// not f32-aligned in Rust). Unorm16 `xyz` become `c / 65535`, `w` the
-    /// stored integer.
-    pub fn floats(&self, offset: u64, length: u64) -> Vec<f32> {
-        let bytes = &self.bytes[offset as usize..(offset + length) as usize];
-        match self.encoding() {
+    /// A section's vec4s as record-space floats. Unorm16 `xyz` become
+    /// `c / 65535`, `w` the stored integer.
+    ///
+    /// f32 sections of a mapped file ([`FileBytes::Mapped`]) are views into
+    /// the mapping, which are f32-aligned there (sections start at multiples
+    /// of 16 bytes, the mapping at a page); anything else is converted into
+    /// a buffer of its own (a `Vec<u8>`'s bytes need not be f32-aligned).
+    pub fn floats(&self, offset: u64, length: u64) -> Floats {
+        let (start, end) = (offset as usize, (offset + length) as usize);
+        if let FileBytes::Mapped(map) = &self.bytes
+            && self.encoding() == Encoding::F32
+            && cfg!(target_endian = "little")
+            && bytemuck::try_cast_slice::<u8, f32>(&map[start..end]).is_ok()
+        {
+            return Floats(FloatsRepr::Mapped {
+                map: map.clone(),
+                start,
+                end,
+            });
+        }
+        let bytes = &self.bytes[start..end];
+        Floats(FloatsRepr::Owned(match self.encoding() {
             Encoding::F32 => bytes
                 .chunks_exact(4)
                 .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
@@ -779,25 +795,130 @@ impl SvpkFile {
                     }
                 })
                 .collect(),
+        }))
+    }
+}
+
+/// The container bytes of an [`SvpkFile`]: read into memory, or mapped.
+#[derive(Debug, Clone)]
+pub enum FileBytes {
+    /// Read into memory (small and compressed files, and files given as bytes).
+    Read(Vec<u8>),
+    /// The file on disk, mapped read-only ([`read_file`], uncompressed files
+    /// of at least [`MAP_MIN`] bytes).
+    Mapped(std::sync::Arc<memmap2::Mmap>),
+}
+
+impl std::ops::Deref for FileBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            FileBytes::Read(v) => v,
+            FileBytes::Mapped(m) => m,
         }
     }
 }
 
+/// A section's record-space floats ([`SvpkFile::floats`]): a view into a
+/// mapped file, or floats of their own. Derefs to `[f32]`.
+#[derive(Clone)]
+pub struct Floats(FloatsRepr);
+
+#[derive(Clone)]
+enum FloatsRepr {
+    Owned(Vec<f32>),
+    /// Bytes `start..end` of the mapping, f32-aligned (checked when made).
+    Mapped {
+        map: std::sync::Arc<memmap2::Mmap>,
+        start: usize,
+        end: usize,
+    },
+}
+
+impl std::ops::Deref for Floats {
+    type Target = [f32];
+    fn deref(&self) -> &[f32] {
+        match &self.0 {
+            FloatsRepr::Owned(v) => v,
+            FloatsRepr::Mapped { map, start, end } => bytemuck::cast_slice(&map[*start..*end]),
+        }
+    }
+}
+
+impl From<Vec<f32>> for Floats {
+    fn from(v: Vec<f32>) -> Self {
+        Floats(FloatsRepr::Owned(v))
+    }
+}
+
+impl std::fmt::Debug for Floats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kind = match self.0 {
+            FloatsRepr::Owned(_) => "owned",
+            FloatsRepr::Mapped { .. } => "mapped",
+        };
+        write!(f, "Floats({} floats, {kind})", self.len())
+    }
+}
+
+/// Uncompressed files of at least this many bytes are mapped by
+/// [`read_file`] instead of read.
+///
+/// Why: reading copies the file into fresh memory, which this kind of
+/// machine (a VM whose host hands pages out slowly) zeroes at as little as
+/// 0.4 GB/s, and [`SvpkFile::floats`] then copied it again. Mapped, the
+/// page cache's own pages are the bytes and the f32 sections are views of
+/// them: the dragon's 125 MB output read and checked in 21–22 ms against
+/// 51–365 ms (README, "Eighth round"). Small files are read: a mapping
+/// costs more than it saves there.
+pub const MAP_MIN: u64 = 1 << 20;
+
 /// Reads and fully validates a file from disk.
+///
+/// Uncompressed files of at least [`MAP_MIN`] bytes are mapped read-only
+/// ([`FileBytes::Mapped`]). Like any reader of a mapped file, this assumes
+/// no other process rewrites or truncates the file in place while it is
+/// read (svpack itself never does: it writes a temp file and renames it over
+/// the old one, whose mapping keeps the old bytes).
 pub fn read_file(path: &Path) -> Result<SvpkFile> {
-    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let io = |e| Error::io(path, e);
+    let file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    if len >= MAP_MIN {
+        // SAFETY: memmap2's contract: the file must not change while
+        // mapped; see the function's documentation.
+        if let Ok(map) = unsafe { memmap2::MmapOptions::new().populate().map(&file) }
+            && !map.starts_with(&ZSTD_MAGIC)
+        {
+            let bytes = FileBytes::Mapped(std::sync::Arc::new(map));
+            return decode_bytes(path, bytes, len, false);
+        }
+    }
+    let mut data = Vec::with_capacity(len as usize);
+    std::io::Read::read_to_end(&mut &file, &mut data).map_err(io)?;
     decode(path, data)
 }
 
 /// Validates and decodes file bytes (`path` is only used in messages).
 pub fn decode(path: &Path, data: Vec<u8>) -> Result<SvpkFile> {
-    let err = |msg: String| Error::input(path, msg);
     let file_bytes = data.len() as u64;
-    let (bytes, compressed) = if data.starts_with(&ZSTD_MAGIC) {
-        (decompress(path, &data)?, true)
+    if data.starts_with(&ZSTD_MAGIC) {
+        let bytes = FileBytes::Read(decompress(path, &data)?);
+        decode_bytes(path, bytes, file_bytes, true)
     } else {
-        (data, false)
-    };
+        decode_bytes(path, FileBytes::Read(data), file_bytes, false)
+    }
+}
+
+/// [`decode`] of the container `bytes` (decompressed already when the file
+/// on disk, `file_bytes` long, was `compressed`).
+fn decode_bytes(
+    path: &Path,
+    bytes: FileBytes,
+    file_bytes: u64,
+    compressed: bool,
+) -> Result<SvpkFile> {
+    let err = |msg: String| Error::input(path, msg);
     if bytes.len() < PREAMBLE_LEN {
         return Err(err(format!(
             "truncated file: {} bytes, shorter than the {PREAMBLE_LEN}-byte preamble",

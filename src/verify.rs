@@ -16,7 +16,7 @@
 
 use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
 use crate::evaluate_indexed::IndexedCaps;
-use crate::format::SvpkFile;
+use crate::format::{Floats, SvpkFile};
 use crate::multiplicity::{Light, cap_corner, side_corner, to_infinity};
 use crate::position_index::{PositionTable, TriangleIndex};
 use crate::weld::order_key;
@@ -37,7 +37,7 @@ pub struct Decoded {
     /// index this.
     pub positions: Vec<[f32; 3]>,
     /// Caps records as floats (12 per triangle), as the GPU reads them.
-    pub caps_data: Vec<f32>,
+    pub caps_data: Floats,
     /// Caps corner ids.
     pub caps: Vec<[u32; 3]>,
     /// Side buckets.
@@ -55,7 +55,7 @@ pub struct DecodedBucket {
     /// Opposite slots per record.
     pub k: usize,
     /// Records as floats, `(2 + k) · 4` per record.
-    pub data: Vec<f32>,
+    pub data: Floats,
     /// A, B and opposite ids per record (`2 + k` ids each); `u32::MAX` for a
     /// position that is not a caps corner.
     pub ids: Vec<u32>,
