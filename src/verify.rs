@@ -190,7 +190,8 @@ impl StructureReport {
 }
 
 /// Check 1: bijection between caps (triangle, edge) pairs and sides
-/// (record, slot) pairs, plus per-record invariants.
+/// (record, slot) pairs, plus per-record invariants and finite caps
+/// positions (each non-finite one is a record error).
 pub fn check_structure(d: &Decoded) -> StructureReport {
     let mut rep = StructureReport::default();
     let note = |rep: &mut StructureReport, msg: String| {
@@ -198,6 +199,16 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
             rep.first_problem = Some(msg);
         }
     };
+    // Positions the shaders could not compute with (the geometric checks
+    // skip such a mesh, see `verify_decoded`).
+    for p in d
+        .positions
+        .iter()
+        .filter(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        rep.record_errors += 1;
+        note(&mut rep, format!("caps position {p:?} is not finite"));
+    }
     // (a, b, o) triples from the sides.
     let mut sides: Vec<[u32; 3]> = Vec::new();
     let mut edge_totals: FxHashMap<(u32, u32), (u64, f32)> = FxHashMap::default();
@@ -1073,7 +1084,8 @@ pub struct VerifyReport {
     pub edge_instances: u64,
     /// Structure: unmatched (triangle, edge) / (record, slot) pairs.
     pub bijection_errors: u64,
-    /// Structure: records with bad order or `.w` values.
+    /// Structure: records with bad order or `.w` values, and non-finite caps
+    /// positions.
     pub record_errors: u64,
     /// First structural problem, in words.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -1169,6 +1181,14 @@ pub fn verify_decoded<L: Copy + Into<VerifyLight> + Sync>(
     // Check 1, the pair numbering of check 2 and the shadow-truth index
     // (only needed when samples are asked for), side by side: independent,
     // and each mostly one thread's work.
+    //
+    // A mesh with a non-finite position (a damaged file; check 1 counts
+    // them) gets no shadow samples and no orientation check: the exact
+    // predicates those run need finite values.
+    let finite: Vec<bool> = decoded
+        .iter()
+        .map(|d| d.positions.iter().flatten().all(|v| v.is_finite()))
+        .collect();
     let ((structures, closedness), indexes) = rayon::join(
         || {
             rayon::join(
@@ -1179,7 +1199,8 @@ pub fn verify_decoded<L: Copy + Into<VerifyLight> + Sync>(
         || {
             decoded
                 .iter()
-                .map(|d| (samples > 0).then(|| crate::shadow::ShadowIndex::new(d)))
+                .zip(&finite)
+                .map(|(d, &f)| (samples > 0 && f).then(|| crate::shadow::ShadowIndex::new(d)))
                 .collect::<Vec<_>>()
         },
     );
@@ -1190,9 +1211,20 @@ pub fn verify_decoded<L: Copy + Into<VerifyLight> + Sync>(
             rep.first_problem = s.first_problem;
         }
     }
-    let points: Vec<Vec<[f32; 3]>> = decoded
+    let meshes: Vec<MeshChecks> = decoded
         .iter()
-        .map(|d| crate::shadow::choose_samples(d, samples, 1))
+        .zip(finite)
+        .zip(closedness.into_iter().zip(indexes))
+        .map(|((d, finite), (closedness, index))| MeshChecks {
+            finite,
+            closedness,
+            points: if finite {
+                crate::shadow::choose_samples(d, samples, 1)
+            } else {
+                Vec::new()
+            },
+            index,
+        })
         .collect();
     // Lights run in parallel, each on one worker (the evaluator's own
     // parallel loops then mostly stay on that worker); their reports are
@@ -1209,15 +1241,7 @@ pub fn verify_decoded<L: Copy + Into<VerifyLight> + Sync>(
                 .expect("no panics while held")
                 .pop()
                 .unwrap_or_else(|| decoded.iter().map(|_| Default::default()).collect());
-            let out = check_light(
-                decoded,
-                &closedness,
-                &indexes,
-                &points,
-                &mut evs,
-                given.into(),
-                strategy,
-            );
+            let out = check_light(decoded, &meshes, &mut evs, given.into(), strategy);
             spare.lock().expect("no panics while held").push(evs);
             light_done();
             out
@@ -1243,13 +1267,23 @@ pub fn verify_decoded<L: Copy + Into<VerifyLight> + Sync>(
     rep
 }
 
+/// What [`verify_decoded`] prepares once per mesh for the per-light checks.
+struct MeshChecks {
+    /// Every position is finite (else no orientation or shadow check).
+    finite: bool,
+    /// Check 2's pair numbering.
+    closedness: ClosednessIndex,
+    /// The shadow check's samples (none when not finite).
+    points: Vec<[f32; 3]>,
+    /// The shadow check's index, when samples are asked for.
+    index: Option<crate::shadow::ShadowIndex>,
+}
+
 /// Checks 2 and 3 of one light on every file: its report and its first
 /// shadow mismatch, in words.
 fn check_light(
     decoded: &[Decoded],
-    closedness: &[ClosednessIndex],
-    indexes: &[Option<crate::shadow::ShadowIndex>],
-    points: &[Vec<[f32; 3]>],
+    meshes: &[MeshChecks],
     evs: &mut [(Evaluation, ClosednessScratch)],
     given: VerifyLight,
     strategy: Strategy,
@@ -1273,19 +1307,15 @@ fn check_light(
         time_ms: 0.0,
     };
     let mut first_mismatch = None;
-    for ((((d, ci), index), pts), (ev, scratch)) in decoded
-        .iter()
-        .zip(closedness)
-        .zip(indexes)
-        .zip(points)
-        .zip(evs)
-    {
+    for ((d, m), (ev, scratch)) in decoded.iter().zip(meshes).zip(evs) {
         let light = given.in_record_space(d);
         evaluate_into(d, light, strategy, ev);
-        let c = check_closedness_indexed(d, ci, light, ev, scratch);
-        lr.orientation_errors += orientation_errors(d, light, ev);
-        if let Some(index) = index {
-            let sh = crate::shadow::check_shadow(d, index, light, ev, pts);
+        let c = check_closedness_indexed(d, &m.closedness, light, ev, scratch);
+        if m.finite {
+            lr.orientation_errors += orientation_errors(d, light, ev);
+        }
+        if let Some(index) = &m.index {
+            let sh = crate::shadow::check_shadow(d, index, light, ev, &m.points);
             lr.samples += sh.samples;
             lr.samples_on_faces += sh.on_faces;
             lr.sample_mismatches += sh.mismatches;

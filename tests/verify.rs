@@ -516,7 +516,9 @@ fn shared_evaluation_equals_per_record_evaluation() {
 /// decoded positions are distinct by bits and in the documented total order
 /// (the earlier comparison sort had no total order with NaNs), every caps
 /// id names its corner's exact bits, and `verify` reports the damage (exit
-/// 2) instead of failing.
+/// 2: the NaNs are record errors) instead of failing; the exact predicates
+/// of the geometric checks, which need finite values, are not run on them
+/// (a debug build asserted inside them).
 #[test]
 fn signed_zeros_and_nans_decode_in_a_total_order() {
     let tmp = tempfile::tempdir().unwrap();
@@ -614,4 +616,16 @@ fn signed_zeros_and_nans_decode_in_a_total_order() {
     );
     let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
     assert_eq!(j["ok"], false);
+    assert_eq!(j["record_errors"], 2, "{j}");
+    assert!(
+        j["first_problem"]
+            .as_str()
+            .unwrap()
+            .contains("is not finite"),
+        "{j}"
+    );
+    assert_eq!(j["samples"], 0, "{j}");
+    assert_eq!(j["orientation_errors"], 0, "{j}");
+    let s = check_structure(&d);
+    assert_eq!(s.record_errors, 2, "{s:?}");
 }
