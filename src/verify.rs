@@ -21,7 +21,7 @@ use crate::multiplicity::{Light, cap_corner, side_corner, to_infinity};
 use crate::position_index::{PositionTable, TriangleIndex};
 use crate::weld::order_key;
 use rayon::prelude::*;
-use rustc_hash::FxHashMap;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 /// One mesh of a file, decoded for checking. Everything is in the mesh's
 /// record space (format-spec §4.5), where the shaders compute.
@@ -78,6 +78,10 @@ impl DecodedBucket {
 
 /// Sentinel id of a sides position that appears in no caps triangle.
 pub const UNKNOWN: u32 = u32::MAX;
+
+/// Records per parallel block of [`check_structure`]; fixed, so its report
+/// does not depend on the number of threads.
+const STRUCTURE_BLOCK: usize = 1 << 14;
 
 /// Ids in increasing order and the parity (+1 even, −1 odd) of the sorting
 /// permutation: the contract's network on ids
@@ -209,104 +213,197 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
         rep.record_errors += 1;
         note(&mut rep, format!("caps position {p:?} is not finite"));
     }
-    // (a, b, o) triples from the sides.
-    let mut sides: Vec<[u32; 3]> = Vec::new();
-    let mut edge_totals: FxHashMap<(u32, u32), (u64, f32)> = FxHashMap::default();
+    // Per record, in parallel blocks: its (a, b, o) triples, its edge key
+    // with its number and B.w for the per-edge totals below, and the
+    // order and .w checks (problems kept per block, so the first one is
+    // the first in file order).
+    let records: usize = d.buckets.iter().map(|b| b.records()).sum();
+    // (a << 64 | b << 32 | B.w bits, record number): sorted, the records
+    // of one edge are adjacent and in file order.
+    let mut edges = vec![(0u128, 0u32); records];
+    let mut edge_rest = &mut edges[..];
+    // The bijection's sides (see below): regular slots counted per caps
+    // corner set and edge, the others listed.
+    let slot_counts: Vec<AtomicU32> = (0..3 * d.caps.len()).map(|_| AtomicU32::new(0)).collect();
+    let mut odd_sides: Vec<[u32; 3]> = Vec::new();
+    let mut first_record = 0;
+    let mut found: Vec<(u64, Option<String>, Vec<[u32; 3]>)> = Vec::new();
     for b in &d.buckets {
-        let w = 2 + b.k;
-        for (r, (ids, f)) in b
-            .ids
-            .chunks_exact(w)
-            .zip(b.data.chunks_exact(4 * w))
-            .enumerate()
-        {
-            let (a, bb) = (ids[0], ids[1]);
-            let bad_order = a == UNKNOWN || bb == UNKNOWN || a >= bb;
-            let bad_w = f[3] != b.k as f32 || (0..b.k).any(|j| f[8 + 4 * j + 3] != 1.0);
-            if bad_order || bad_w {
-                rep.record_errors += 1;
-                note(
-                    &mut rep,
-                    format!(
-                        "bucket k={} record {r}: {}",
-                        b.k,
-                        if bad_order {
-                            "A is not below B (or not a caps corner)"
-                        } else {
-                            "wrong .w value"
+        let (w, k, n) = (2 + b.k, b.k, b.records());
+        let (bucket_edges, rest) = edge_rest.split_at_mut(n);
+        edge_rest = rest;
+        found.par_extend(
+            bucket_edges
+                .par_chunks_mut(STRUCTURE_BLOCK)
+                .enumerate()
+                .map(|(blk, out_edges)| {
+                    let mut errors = 0u64;
+                    let mut first = None;
+                    let mut odd = Vec::new();
+                    for (j, out_edge) in out_edges.iter_mut().enumerate() {
+                        let r = blk * STRUCTURE_BLOCK + j;
+                        let ids = &b.ids[w * r..w * (r + 1)];
+                        let f = &b.data[4 * w * r..4 * w * (r + 1)];
+                        let (a, bb) = (ids[0], ids[1]);
+                        let bad_order = a == UNKNOWN || bb == UNKNOWN || a >= bb;
+                        let bad_w = f[3] != k as f32 || (0..k).any(|s| f[8 + 4 * s + 3] != 1.0);
+                        if bad_order || bad_w {
+                            errors += 1;
+                            first.get_or_insert_with(|| {
+                                format!(
+                                    "bucket k={k} record {r}: {}",
+                                    if bad_order {
+                                        "A is not below B (or not a caps corner)"
+                                    } else {
+                                        "wrong .w value"
+                                    }
+                                )
+                            });
                         }
-                    ),
-                );
-            }
-            let t = edge_totals.entry((a, bb)).or_insert((0, f[7]));
-            t.0 += b.k as u64;
-            if t.1 != f[7] {
-                rep.record_errors += 1;
-                note(
-                    &mut rep,
-                    format!(
-                        "bucket k={} record {r}: B.w differs between chunks of one edge",
-                        b.k
-                    ),
-                );
-            }
-            for &o in &ids[2..] {
-                sides.push([a, bb, o]);
-            }
-        }
+                        let key = (a as u128) << 64 | (bb as u128) << 32 | f[7].to_bits() as u128;
+                        *out_edge = (key, (first_record + r) as u32);
+                        for (s, &o) in ids[2..].iter().enumerate() {
+                            let t = b.slot_tri[k * r + s];
+                            if t != UNKNOWN && a < bb {
+                                // Which edge of the corner set: o is its
+                                // smallest, middle or largest corner.
+                                let e = usize::from(o > a) + usize::from(o > bb);
+                                slot_counts[3 * t as usize + e].fetch_add(1, Relaxed);
+                            } else {
+                                odd.push([a, bb, o]);
+                            }
+                        }
+                    }
+                    (errors, first, odd)
+                }),
+        );
+        first_record += n;
     }
-    for ((a, b), (n, bw)) in &edge_totals {
-        if (*n as f32).min(d.w_limit) != *bw {
-            rep.record_errors += 1;
-            note(
-                &mut rep,
-                format!("edge {a}-{b}: B.w = {bw} but {n} opposite vertices are stored"),
-            );
+    for (errors, first, odd) in found {
+        rep.record_errors += errors;
+        if let Some(msg) = first {
+            note(&mut rep, msg);
         }
+        odd_sides.extend(odd);
     }
-    // (a, b, o) triples from the caps.
-    let mut caps: Vec<[u32; 3]> = d
-        .caps
-        .par_iter()
-        .flat_map_iter(|t| {
-            (0..3).map(|e| {
-                let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
-                [p.min(q), p.max(q), o]
-            })
+    // Per edge: every record's B.w equals the first record's (in file
+    // order), and that equals the edge's opposite vertices (the sum of its
+    // records' k), saturated at the encoding's limit.
+    // A record number's bucket k and number within its bucket.
+    let ends: Vec<usize> = d
+        .buckets
+        .iter()
+        .scan(0, |end, b| {
+            *end += b.records();
+            Some(*end)
         })
         .collect();
-    // Both sorted by the whole triple: equal triples are identical, so the
-    // parallel sorts give the same order whatever the number of threads.
-    rayon::join(|| sides.par_sort_unstable(), || caps.par_sort_unstable());
-    // Merge: count entries present on one side only (multiset difference).
-    let (mut i, mut j) = (0, 0);
-    while i < sides.len() || j < caps.len() {
-        let take_side = j == caps.len() || (i < sides.len() && sides[i] < caps[j]);
-        let take_cap = i == sides.len() || (j < caps.len() && caps[j] < sides[i]);
-        if take_side {
-            rep.bijection_errors += 1;
+    let locate = |record: u32| {
+        let i = ends.partition_point(|&end| end <= record as usize);
+        let first = if i == 0 { 0 } else { ends[i - 1] };
+        (d.buckets[i].k, record as usize - first)
+    };
+    edges.par_sort_unstable_by_key(|&(key, record)| (key >> 32, record));
+    for group in edges.chunk_by(|x, y| x.0 >> 32 == y.0 >> 32) {
+        let bw = |e: &(u128, u32)| f32::from_bits(e.0 as u32);
+        for e in &group[1..] {
+            if bw(e) != bw(&group[0]) {
+                rep.record_errors += 1;
+                let (k, r) = locate(e.1);
+                note(
+                    &mut rep,
+                    format!("bucket k={k} record {r}: B.w differs between chunks of one edge"),
+                );
+            }
+        }
+        let n: u64 = group.iter().map(|e| locate(e.1).0 as u64).sum();
+        if (n as f32).min(d.w_limit) != bw(&group[0]) {
+            rep.record_errors += 1;
+            let (a, b) = ((group[0].0 >> 64) as u32, (group[0].0 >> 32) as u32);
             note(
                 &mut rep,
                 format!(
-                    "sides entry (A, B, O) = {:?} matches no caps triangle",
-                    ids_to_points(d, sides[i])
+                    "edge {a}-{b}: B.w = {} but {n} opposite vertices are stored",
+                    bw(&group[0])
                 ),
             );
+        }
+    }
+    // Check 1's bijection: the (a, b, o) triples of the sides (a record's
+    // A, B and one of its opposite vertices) and of the caps (each edge of
+    // a triangle, ends in order, and the third corner) are equal
+    // multisets; every triple on one side only is an error, and the first
+    // problem is the smallest such triple. A triple of three distinct
+    // known ids, a < b, whose corner set is a caps triangle's (what decode
+    // found for the slot) is regular: per corner set and edge it is
+    // counted, against the number of caps triangles with that set, instead
+    // of sorting 3 triples per triangle on both sides. The rest (damaged
+    // files only: A not below B, unknown positions, degenerate caps) are
+    // compared by sorting, as all triples once were; no regular triple can
+    // equal one of them.
+    let index = TriangleIndex::new(&d.caps, d.positions.len());
+    let mut class_size = vec![0u32; d.caps.len()];
+    let mut odd_caps: Vec<[u32; 3]> = Vec::new();
+    for t in &d.caps {
+        let (k, _) = crate::evaluate_indexed::sort_ids(*t);
+        match index.get(k) {
+            Some((first, _)) => class_size[first as usize] += 1,
+            None => odd_caps.extend((0..3).map(|e| {
+                let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+                [p.min(q), p.max(q), o]
+            })),
+        }
+    }
+    // (smallest unmatched triple, whether it is a sides entry)
+    let mut first: Option<([u32; 3], bool)> = None;
+    let mut keep = |triple: [u32; 3], side: bool| {
+        if first.is_none_or(|f| triple < f.0) {
+            first = Some((triple, side));
+        }
+    };
+    for (t, &size) in class_size.iter().enumerate().filter(|c| *c.1 > 0) {
+        let (k, _) = crate::evaluate_indexed::sort_ids(d.caps[t]);
+        for e in 0..3 {
+            let count = slot_counts[3 * t + e].load(Relaxed);
+            if count != size {
+                rep.bijection_errors += u64::from(count.abs_diff(size));
+                // The edge opposite corner e, ends in order.
+                let ends: Vec<u32> = (0..3).filter(|&i| i != e).map(|i| k[i]).collect();
+                keep([ends[0], ends[1], k[e]], count > size);
+            }
+        }
+    }
+    // Multiset difference of the rest, sorted (equal triples are
+    // identical, so the order does not depend on the sort).
+    odd_sides.sort_unstable();
+    odd_caps.sort_unstable();
+    let (mut i, mut j) = (0, 0);
+    while i < odd_sides.len() || j < odd_caps.len() {
+        let take_side = j == odd_caps.len() || (i < odd_sides.len() && odd_sides[i] < odd_caps[j]);
+        let take_cap = i == odd_sides.len() || (j < odd_caps.len() && odd_caps[j] < odd_sides[i]);
+        if take_side {
+            rep.bijection_errors += 1;
+            keep(odd_sides[i], true);
             i += 1;
         } else if take_cap {
             rep.bijection_errors += 1;
-            note(
-                &mut rep,
-                format!(
-                    "caps (triangle, edge) {:?} has no sides entry",
-                    ids_to_points(d, caps[j])
-                ),
-            );
+            keep(odd_caps[j], false);
             j += 1;
         } else {
             i += 1;
             j += 1;
         }
+    }
+    if let Some((triple, side)) = first {
+        let points = ids_to_points(d, triple);
+        note(
+            &mut rep,
+            if side {
+                format!("sides entry (A, B, O) = {points:?} matches no caps triangle")
+            } else {
+                format!("caps (triangle, edge) {points:?} has no sides entry")
+            },
+        );
     }
     rep
 }

@@ -629,3 +629,128 @@ fn signed_zeros_and_nans_decode_in_a_total_order() {
     let s = check_structure(&d);
     assert_eq!(s.record_errors, 2, "{s:?}");
 }
+
+/// Check 1's bijection as it was first written: every (a, b, o) triple of
+/// the sides and of the caps sorted, and the multiset difference counted;
+/// the first problem is the smallest unmatched triple.
+fn bijection_by_sorting(d: &svpack::verify::Decoded) -> (u64, Option<String>) {
+    let mut sides = Vec::new();
+    for b in &d.buckets {
+        for ids in b.ids.chunks_exact(2 + b.k) {
+            sides.extend(ids[2..].iter().map(|&o| [ids[0], ids[1], o]));
+        }
+    }
+    let mut caps: Vec<[u32; 3]> = d
+        .caps
+        .iter()
+        .flat_map(|t| {
+            (0..3).map(move |e| {
+                let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+                [p.min(q), p.max(q), o]
+            })
+        })
+        .collect();
+    sides.sort_unstable();
+    caps.sort_unstable();
+    let points = |t: [u32; 3]| {
+        t.iter()
+            .map(|&i| d.positions.get(i as usize).copied())
+            .collect::<Vec<_>>()
+    };
+    let (mut i, mut j, mut errors, mut first) = (0, 0, 0, None);
+    while i < sides.len() || j < caps.len() {
+        if j == caps.len() || (i < sides.len() && sides[i] < caps[j]) {
+            errors += 1;
+            first.get_or_insert_with(|| {
+                format!(
+                    "sides entry (A, B, O) = {:?} matches no caps triangle",
+                    points(sides[i])
+                )
+            });
+            i += 1;
+        } else if i == sides.len() || caps[j] < sides[i] {
+            errors += 1;
+            first.get_or_insert_with(|| {
+                format!(
+                    "caps (triangle, edge) {:?} has no sides entry",
+                    points(caps[j])
+                )
+            });
+            j += 1;
+        } else {
+            i += 1;
+            j += 1;
+        }
+    }
+    (errors, first)
+}
+
+/// Check 1's bijection (regular triples counted per corner set, the rest
+/// sorted) against sorting every triple, on files damaged at random: vec4s
+/// of the sides and caps overwritten with other positions of the file
+/// (moved ends, swapped A and B, degenerate and duplicated caps).
+#[test]
+fn bijection_counts_what_sorting_every_triple_counts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let mut bits = {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        }
+    };
+    let (mut damaged, mut firsts) = (0, 0);
+    for name in [
+        "fan12.obj",
+        "dup_degen.obj",
+        "two_tets.obj",
+        "seamed_cube.obj",
+    ] {
+        let src = &fx.iter().find(|f| f.0 == name).unwrap().1;
+        let out = tmp.path().join(format!("{name}.svpk"));
+        svpack()
+            .arg("build")
+            .arg(src)
+            .arg("-o")
+            .arg(&out)
+            .assert()
+            .code(0);
+        let clean = std::fs::read(&out).unwrap();
+        let h = svpack::format::read_file(&out).unwrap().header;
+        let po = h.payload_offset as usize;
+        let vec4s = (clean.len() - po) / 16;
+        for case in 0..150 {
+            let mut bytes = clean.clone();
+            // 1 to 3 vec4s (xyz only) overwritten by other vec4s' xyz.
+            for _ in 0..1 + case % 3 {
+                let (to, from) = (bits() as usize % vec4s, bits() as usize % vec4s);
+                let (to, from) = (po + 16 * to, po + 16 * from);
+                let xyz: Vec<u8> = bytes[from..from + 12].to_vec();
+                bytes[to..to + 12].copy_from_slice(&xyz);
+            }
+            let crc = crc32fast::hash(&bytes[po..]);
+            let mut hh = h.clone();
+            hh.payload_crc32 = crc;
+            let hb = bincode::serde::encode_to_vec(&hh, bincode::config::legacy()).unwrap();
+            bytes[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
+            bytes[24..24 + hb.len()].copy_from_slice(&hb);
+            let file = svpack::format::decode(&out, bytes).unwrap();
+            let d = decode(&file, 0);
+            let s = check_structure(&d);
+            let (errors, first) = bijection_by_sorting(&d);
+            assert_eq!(s.bijection_errors, errors, "{name} case {case}");
+            damaged += usize::from(errors > 0);
+            if s.record_errors == 0 {
+                assert_eq!(s.first_problem, first, "{name} case {case}");
+                firsts += usize::from(first.is_some());
+            }
+        }
+    }
+    assert!(
+        damaged > 300 && firsts > 100,
+        "{damaged} damaged, {firsts} compared"
+    );
+}
