@@ -12,15 +12,34 @@ use svpack::verify::{check_closedness, check_structure, decode, evaluate};
 /// the semantic checks can notice.
 fn patch_payload(path: &std::path::Path, f: impl Fn(&mut [u8], &svpack::format::Header)) {
     let mut bytes = std::fs::read(path).unwrap();
-    let file = svpack::format::read_file(path).unwrap();
-    let mut h = file.header.clone();
-    let po = h.payload_offset as usize;
-    f(&mut bytes[po..], &h);
-    h.payload_crc32 = crc32fast::hash(&bytes[po..]);
+    let h = svpack::format::read_file(path).unwrap().header;
+    f(&mut bytes[h.payload_offset as usize..], &h);
+    fix_checksums(&mut bytes, &h);
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// Rewrites both checksums of file bytes whose payload was changed (`h`:
+/// the file's header).
+fn fix_checksums(bytes: &mut [u8], h: &svpack::format::Header) {
+    let mut h = h.clone();
+    h.payload_crc32 = crc32fast::hash(&bytes[h.payload_offset as usize..]);
     let hb = bincode::serde::encode_to_vec(&h, bincode::config::legacy()).unwrap();
     bytes[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
     bytes[24..24 + hb.len()].copy_from_slice(&hb);
-    std::fs::write(path, bytes).unwrap();
+}
+
+/// `svpack verify FILE --json ARGS`: exit code and report.
+fn verify_json(path: &std::path::Path, args: &[&str]) -> (Option<i32>, serde_json::Value) {
+    let r = svpack()
+        .arg("verify")
+        .arg(path)
+        .arg("--json")
+        .args(args)
+        .output()
+        .unwrap();
+    let j = serde_json::from_slice(&r.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&r.stderr)));
+    (r.status.code(), j)
 }
 
 /// The hard cases written as OBJ files into `dir`, then the shared OBJ
@@ -38,8 +57,8 @@ fn hard_cases_and(dir: &std::path::Path, models: &[&str]) -> Vec<std::path::Path
     inputs
 }
 
-/// Builds fixture `name` into a temp dir and decodes its first mesh.
-fn built_fixture(name: &str) -> (tempfile::TempDir, svpack::verify::Decoded) {
+/// Builds fixture `name` into a temp dir: the dir and the file.
+fn built_file(name: &str) -> (tempfile::TempDir, std::path::PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
     let fx = write_fixtures(tmp.path());
     let src = &fx.iter().find(|f| f.0 == name).unwrap().1;
@@ -51,6 +70,12 @@ fn built_fixture(name: &str) -> (tempfile::TempDir, svpack::verify::Decoded) {
         .arg(&out)
         .assert()
         .code(0);
+    (tmp, out)
+}
+
+/// Builds fixture `name` into a temp dir and decodes its first mesh.
+fn built_fixture(name: &str) -> (tempfile::TempDir, svpack::verify::Decoded) {
+    let (tmp, out) = built_file(name);
     let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
     (tmp, d)
 }
@@ -521,17 +546,7 @@ fn shared_evaluation_equals_per_record_evaluation() {
 /// (a debug build asserted inside them).
 #[test]
 fn signed_zeros_and_nans_decode_in_a_total_order() {
-    let tmp = tempfile::tempdir().unwrap();
-    let fx = write_fixtures(tmp.path());
-    let src = &fx.iter().find(|f| f.0 == "seamed_cube.obj").unwrap().1;
-    let out = tmp.path().join("odd.svpk");
-    svpack()
-        .arg("build")
-        .arg(src)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .code(0);
+    let (_tmp, out) = built_file("seamed_cube.obj");
     let clean = decode(&svpack::format::read_file(&out).unwrap(), 0);
     let zero = clean
         .positions
@@ -602,19 +617,8 @@ fn signed_zeros_and_nans_decode_in_a_total_order() {
         d.indexed.is_none(),
         "a ±0.0 pair and NaNs: no sorted-id caps"
     );
-    let r = svpack()
-        .arg("verify")
-        .arg(&out)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert_eq!(
-        r.status.code(),
-        Some(2),
-        "{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let (code, j) = verify_json(&out, &[]);
+    assert_eq!(code, Some(2), "{j}");
     assert_eq!(j["ok"], false);
     assert_eq!(j["record_errors"], 2, "{j}");
     assert!(
@@ -691,8 +695,6 @@ fn bijection_by_sorting(d: &svpack::verify::Decoded) -> (u64, Option<String>) {
 /// (moved ends, swapped A and B, degenerate and duplicated caps).
 #[test]
 fn bijection_counts_what_sorting_every_triple_counts() {
-    let tmp = tempfile::tempdir().unwrap();
-    let fx = write_fixtures(tmp.path());
     let mut bits = {
         let mut s = 0x9E37_79B9_7F4A_7C15u64;
         move || {
@@ -709,15 +711,7 @@ fn bijection_counts_what_sorting_every_triple_counts() {
         "two_tets.obj",
         "seamed_cube.obj",
     ] {
-        let src = &fx.iter().find(|f| f.0 == name).unwrap().1;
-        let out = tmp.path().join(format!("{name}.svpk"));
-        svpack()
-            .arg("build")
-            .arg(src)
-            .arg("-o")
-            .arg(&out)
-            .assert()
-            .code(0);
+        let (_tmp, out) = built_file(name);
         let clean = std::fs::read(&out).unwrap();
         let h = svpack::format::read_file(&out).unwrap().header;
         let po = h.payload_offset as usize;
@@ -731,12 +725,7 @@ fn bijection_counts_what_sorting_every_triple_counts() {
                 let xyz: Vec<u8> = bytes[from..from + 12].to_vec();
                 bytes[to..to + 12].copy_from_slice(&xyz);
             }
-            let crc = crc32fast::hash(&bytes[po..]);
-            let mut hh = h.clone();
-            hh.payload_crc32 = crc;
-            let hb = bincode::serde::encode_to_vec(&hh, bincode::config::legacy()).unwrap();
-            bytes[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
-            bytes[24..24 + hb.len()].copy_from_slice(&hb);
+            fix_checksums(&mut bytes, &h);
             let file = svpack::format::decode(&out, bytes).unwrap();
             let d = decode(&file, 0);
             let s = check_structure(&d);
