@@ -887,11 +887,19 @@ pub fn read_file(path: &Path) -> Result<SvpkFile> {
     if len >= MAP_MIN {
         // SAFETY: memmap2's contract: the file must not change while
         // mapped; see the function's documentation.
-        if let Ok(map) = unsafe { memmap2::MmapOptions::new().populate().map(&file) }
-            && !map.starts_with(&ZSTD_MAGIC)
-        {
-            let bytes = FileBytes::Mapped(std::sync::Arc::new(map));
-            return decode_bytes(path, bytes, len, false);
+        if let Ok(map) = unsafe { memmap2::MmapOptions::new().populate().map(&file) } {
+            // A compressed file is decompressed straight from the mapping.
+            return if map.starts_with(&ZSTD_MAGIC) {
+                let bytes = FileBytes::Read(decompress(path, &map)?);
+                decode_bytes(path, bytes, len, true)
+            } else {
+                decode_bytes(
+                    path,
+                    FileBytes::Mapped(std::sync::Arc::new(map)),
+                    len,
+                    false,
+                )
+            };
         }
     }
     let mut data = Vec::with_capacity(len as usize);

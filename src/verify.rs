@@ -40,6 +40,11 @@ pub struct Decoded {
     pub caps_data: Floats,
     /// Caps corner ids.
     pub caps: Vec<[u32; 3]>,
+    /// Per caps triangle: the first caps triangle with the same three
+    /// corner ids (itself, or a duplicate before it), or [`UNKNOWN`] when
+    /// its corners are not three distinct ids. The triangle each opposite
+    /// slot names ([`DecodedBucket::slot_tri`]) is such a first one.
+    pub cap_first: Vec<u32>,
     /// Side buckets.
     pub buckets: Vec<DecodedBucket>,
     /// The caps as sorted corner ids into `positions`, for the per-light
@@ -131,6 +136,10 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
     // Each triangle once, by its sorted corner ids, with the parity of the
     // sort (duplicates of a corner set: any of them gives the same sign).
     let by_corners = TriangleIndex::new(&caps, positions.len());
+    let cap_first: Vec<u32> = caps
+        .par_iter()
+        .map(|c| by_corners.get(sort_ids(*c).0).map_or(UNKNOWN, |f| f.0))
+        .collect();
     let buckets = m
         .buckets
         .iter()
@@ -171,6 +180,7 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         positions,
         caps_data,
         caps,
+        cap_first,
         buckets,
     }
 }
@@ -213,10 +223,10 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
         rep.record_errors += 1;
         note(&mut rep, format!("caps position {p:?} is not finite"));
     }
-    // Per record, in parallel blocks: its (a, b, o) triples, its edge key
-    // with its number and B.w for the per-edge totals below, and the
-    // order and .w checks (problems kept per block, so the first one is
-    // the first in file order).
+    // Per record, in parallel blocks: the order and .w checks (problems
+    // kept per block, so the first one is the first in file order), its
+    // edge key with its number and B.w for the per-edge totals below, and
+    // its (a, b, o) triples for the bijection after them.
     let records: usize = d.buckets.iter().map(|b| b.records()).sum();
     // (a << 64 | b << 32 | B.w bits, record number): sorted, the records
     // of one edge are adjacent and in file order.
@@ -286,9 +296,6 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
         }
         odd_sides.extend(odd);
     }
-    // Per edge: every record's B.w equals the first record's (in file
-    // order), and that equals the edge's opposite vertices (the sum of its
-    // records' k), saturated at the encoding's limit.
     // A record number's bucket k and number within its bucket.
     let ends: Vec<usize> = d
         .buckets
@@ -303,6 +310,9 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
         let first = if i == 0 { 0 } else { ends[i - 1] };
         (d.buckets[i].k, record as usize - first)
     };
+    // Per edge: every record's B.w equals the first record's (in file
+    // order), and that equals the edge's opposite vertices (the sum of its
+    // records' k), saturated at the encoding's limit.
     edges.par_sort_unstable_by_key(|&(key, record)| (key >> 32, record));
     for group in edges.chunk_by(|x, y| x.0 >> 32 == y.0 >> 32) {
         let bw = |e: &(u128, u32)| f32::from_bits(e.0 as u32);
@@ -341,17 +351,16 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
     // files only: A not below B, unknown positions, degenerate caps) are
     // compared by sorting, as all triples once were; no regular triple can
     // equal one of them.
-    let index = TriangleIndex::new(&d.caps, d.positions.len());
     let mut class_size = vec![0u32; d.caps.len()];
     let mut odd_caps: Vec<[u32; 3]> = Vec::new();
-    for t in &d.caps {
-        let (k, _) = crate::evaluate_indexed::sort_ids(*t);
-        match index.get(k) {
-            Some((first, _)) => class_size[first as usize] += 1,
-            None => odd_caps.extend((0..3).map(|e| {
+    for (t, &first) in d.caps.iter().zip(&d.cap_first) {
+        if first != UNKNOWN {
+            class_size[first as usize] += 1;
+        } else {
+            odd_caps.extend((0..3).map(|e| {
                 let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
                 [p.min(q), p.max(q), o]
-            })),
+            }));
         }
     }
     // (smallest unmatched triple, whether it is a sides entry)
