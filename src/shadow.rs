@@ -866,16 +866,9 @@ mod tests {
                 [0.2, -0.3, 1.0, 0.0],
             ],
         );
-        let tmp = tempfile::tempdir().unwrap();
         let (mut met, mut listed, mut pairs) = (0usize, 0usize, 0usize);
-        for (n, (v, f, lights)) in [folded, bumpy].into_iter().enumerate() {
-            let (input, output) = (
-                tmp.path().join(format!("{n}.obj")),
-                tmp.path().join(format!("{n}.svpk")),
-            );
-            std::fs::write(&input, crate::hardcases::obj(&v, &f)).unwrap();
-            crate::build::build_file(&input, &output, &Default::default()).unwrap();
-            let d = decode(&crate::format::read_file(&output).unwrap(), 0);
+        for (v, f, lights) in [folded, bumpy] {
+            let d = built(&v, &f);
             for light in lights {
                 let ev = evaluate(&d, light, Strategy::Reference);
                 let sides = emitted_sides(&d, light, &ev);
@@ -945,6 +938,15 @@ mod tests {
     /// that wedge (6.6 units from the exact plane, 5.1 from the emitted one):
     /// the emitted volume gives winding 0 there, exactly 2 triangles lie
     /// between it and the light.
+    /// Builds the mesh `v`, `f` with the default options and decodes it.
+    fn built(v: &[[f32; 3]], f: &[[usize; 3]]) -> Decoded {
+        let tmp = tempfile::tempdir().unwrap();
+        let (input, output) = (tmp.path().join("m.obj"), tmp.path().join("m.svpk"));
+        std::fs::write(&input, crate::hardcases::obj(v, f)).unwrap();
+        crate::build::build_file(&input, &output, &Default::default()).unwrap();
+        decode(&crate::format::read_file(&output).unwrap(), 0)
+    }
+
     #[test]
     fn back_caps_count_where_the_rays_end_inside_the_shadow() {
         // A closed box and point lights placed so that the rays of the
@@ -952,11 +954,7 @@ mod tests {
         // the box's shadow: there the back caps give the winding its
         // count (elsewhere their term is 0, and a wrong one goes unseen).
         let (v, f) = crate::hardcases::closed_box(3, 1.0, [0.0; 3]);
-        let tmp = tempfile::tempdir().unwrap();
-        let (input, output) = (tmp.path().join("box.obj"), tmp.path().join("box.svpk"));
-        std::fs::write(&input, crate::hardcases::obj(&v, &f)).unwrap();
-        crate::build::build_file(&input, &output, &Default::default()).unwrap();
-        let d = decode(&crate::format::read_file(&output).unwrap(), 0);
+        let d = built(&v, &f);
         let index = ShadowIndex::new(&d);
         let (lo, hi) = crate::build::bounds(&d.positions);
         let c = [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]));
@@ -998,11 +996,7 @@ mod tests {
         let f = [[1, 0, 2], [0, 4, 1]];
         let light: Light = [-0.5, 0.0, 0.0, 1.0];
         let sample = [49.957_226, -550.836, 134.612_49];
-        let tmp = tempfile::tempdir().unwrap();
-        let (input, output) = (tmp.path().join("soup.obj"), tmp.path().join("soup.svpk"));
-        std::fs::write(&input, crate::hardcases::obj(&v, &f)).unwrap();
-        crate::build::build_file(&input, &output, &Default::default()).unwrap();
-        let d = decode(&crate::format::read_file(&output).unwrap(), 0);
+        let d = built(&v, &f);
         let index = ShadowIndex::new(&d);
         let ev = evaluate(&d, light, Strategy::Reference);
         assert_eq!(orientation_errors(&d, light, &ev), 0);
