@@ -361,7 +361,6 @@ impl SideCandidates {
             .collect();
         let mut lists = vec![Vec::new(); samples.len()];
         for (i, e) in sides.iter().enumerate() {
-            let linear = EdgeFunctions::new(&e.corners, [dh[0], dh[1], dh[2]], origin);
             let mut blo = [f64::INFINITY; 2];
             let mut bhi = [f64::NEG_INFINITY; 2];
             for c in &e.corners {
@@ -393,6 +392,7 @@ impl SideCandidates {
             if (0..2).any(|k| bhi[k] < lo[k] || blo[k] > hi[k]) {
                 continue;
             }
+            let linear = EdgeFunctions::new(&e.corners, [dh[0], dh[1], dh[2]], origin);
             let range = |k: usize| {
                 let a = ((blo[k] - lo[k]) / cell[k]).floor().max(0.0) as usize;
                 let b = ((bhi[k] - lo[k]) / cell[k]).floor().min((grid - 1) as f64) as usize;
