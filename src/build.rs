@@ -98,11 +98,27 @@ pub struct BuildOutput {
 
 /// Rejects non-finite positions used by any triangle and out-of-range
 /// indices, naming the part they come from.
+///
+/// Method: two linear passes settle the usual case, every index in range
+/// and every position finite (`max` and a finiteness fold vectorise).
+/// Only when either fails are the corners walked in triangle order, one
+/// gathered position each, to find and name the first problem; a
+/// non-finite position no triangle uses is then no error. The walk alone
+/// took 6 ms of a 1-thread build of the 871k-triangle dragon (`perf`).
 pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
     if !soup.indices.len().is_multiple_of(3) {
         return Err(Error::input(path, "index count is not a multiple of 3"));
     }
     let n = soup.positions.len();
+    let in_range = soup.indices.iter().max().is_none_or(|&m| (m as usize) < n);
+    let finite = |c: &[[f32; 3]]| {
+        c.iter().fold(true, |ok, p| {
+            ok & p[0].is_finite() & p[1].is_finite() & p[2].is_finite()
+        })
+    };
+    if in_range && soup.positions.chunks(4096).all(finite) {
+        return Ok(());
+    }
     for (t, c) in soup.indices.chunks_exact(3).enumerate() {
         for &i in c {
             let where_ = || {
@@ -505,5 +521,77 @@ pub fn build_batch_with(
     match pool {
         Ok(pool) => pool.install(run),
         Err(_) => run(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::load::Part;
+
+    /// Two parts of two triangles each over 6 vertices, vertex 5 unused.
+    fn soup(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> Soup {
+        let part = |name: &str, first| Part {
+            name: name.into(),
+            first_triangle: first,
+            triangle_count: 2,
+        };
+        Soup {
+            positions,
+            indices,
+            parts: vec![part("front", 0), part("back", 2)],
+            ..Soup::default()
+        }
+    }
+
+    fn grid() -> Vec<[f32; 3]> {
+        (0..6).map(|i| [i as f32, (i % 2) as f32, 0.0]).collect()
+    }
+
+    const TRIS: [u32; 12] = [0, 1, 2, 1, 3, 2, 2, 3, 4, 3, 0, 4];
+
+    fn message(s: &Soup) -> String {
+        check_soup(Path::new("m.obj"), s).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn check_soup_passes_clean_and_unused_non_finite_positions() {
+        assert!(check_soup(Path::new("m.obj"), &soup(grid(), TRIS.to_vec())).is_ok());
+        // Vertex 5 is used by no triangle: whatever it holds is no error
+        // (the fast path fails on it and the walk clears it).
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut p = grid();
+            p[5] = [0.0, bad, 0.0];
+            assert!(check_soup(Path::new("m.obj"), &soup(p, TRIS.to_vec())).is_ok());
+        }
+        assert!(check_soup(Path::new("m.obj"), &Soup::default()).is_ok());
+    }
+
+    #[test]
+    fn check_soup_names_the_first_bad_corner_and_its_part() {
+        // A used non-finite position, in the second part.
+        let mut p = grid();
+        p[4] = [f32::NAN, 0.0, 0.0];
+        let msg = message(&soup(p.clone(), TRIS.to_vec()));
+        assert!(msg.contains("m.obj"), "{msg}");
+        assert!(
+            msg.contains("triangle 2 in back: vertex 4 has a non-finite position (NaN, 0, 0)"),
+            "{msg}"
+        );
+        // An out-of-range index in the first part comes first.
+        let mut t = TRIS.to_vec();
+        t[4] = 9;
+        let msg = message(&soup(p, t));
+        assert!(
+            msg.contains("triangle 1 in front: vertex index 9 out of range (6 vertices)"),
+            "{msg}"
+        );
+        // An infinite position alone.
+        let mut p = grid();
+        p[0] = [0.0, 0.0, f32::INFINITY];
+        let msg = message(&soup(p, TRIS.to_vec()));
+        assert!(msg.contains("triangle 0 in front: vertex 0"), "{msg}");
+        let msg = message(&soup(grid(), TRIS[..11].to_vec()));
+        assert!(msg.contains("not a multiple of 3"), "{msg}");
     }
 }

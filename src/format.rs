@@ -799,25 +799,7 @@ impl SvpkFile {
     }
 }
 
-/// The container bytes of an [`SvpkFile`]: read into memory, or mapped.
-#[derive(Debug, Clone)]
-pub enum FileBytes {
-    /// Read into memory (small and compressed files, and files given as bytes).
-    Read(Vec<u8>),
-    /// The file on disk, mapped read-only ([`read_file`], uncompressed files
-    /// of at least [`MAP_MIN`] bytes).
-    Mapped(std::sync::Arc<memmap2::Mmap>),
-}
-
-impl std::ops::Deref for FileBytes {
-    type Target = [u8];
-    fn deref(&self) -> &[u8] {
-        match self {
-            FileBytes::Read(v) => v,
-            FileBytes::Mapped(m) => m,
-        }
-    }
-}
+pub use crate::file_bytes::{FileBytes, MAP_MIN};
 
 /// A section's record-space floats ([`SvpkFile::floats`]): a view into a
 /// mapped file, or floats of their own. Derefs to `[f32]`.
@@ -861,50 +843,27 @@ impl std::fmt::Debug for Floats {
     }
 }
 
-/// Uncompressed files of at least this many bytes are mapped by
-/// [`read_file`] instead of read.
-///
-/// Why: reading copies the file into fresh memory, which this kind of
-/// machine (a VM whose host hands pages out slowly) zeroes at as little as
-/// 0.4 GB/s, and [`SvpkFile::floats`] then copied it again. Mapped, the
-/// page cache's own pages are the bytes and the f32 sections are views of
-/// them: the dragon's 125 MB output read and checked in 21–22 ms against
-/// 51–365 ms (README, "Eighth round"). Small files are read: a mapping
-/// costs more than it saves there.
-pub const MAP_MIN: u64 = 1 << 20;
-
 /// Reads and fully validates a file from disk.
 ///
 /// Uncompressed files of at least [`MAP_MIN`] bytes are mapped read-only
-/// ([`FileBytes::Mapped`]). Like any reader of a mapped file, this assumes
-/// no other process rewrites or truncates the file in place while it is
-/// read (svpack itself never does: it writes a temp file and renames it over
-/// the old one, whose mapping keeps the old bytes).
+/// ([`FileBytes::Mapped`], see [`crate::file_bytes`] for the contract), and
+/// [`SvpkFile::floats`] returns views of their f32 sections instead of
+/// copying them: the dragon's 125 MB output read and checked in 21–22 ms
+/// against 51–365 ms read (README, "Eighth round").
 pub fn read_file(path: &Path) -> Result<SvpkFile> {
-    let io = |e| Error::io(path, e);
-    let file = std::fs::File::open(path).map_err(io)?;
-    let len = file.metadata().map_err(io)?.len();
-    if len >= MAP_MIN {
-        // SAFETY: memmap2's contract: the file must not change while
-        // mapped; see the function's documentation.
-        if let Ok(map) = unsafe { memmap2::MmapOptions::new().populate().map(&file) } {
-            // A compressed file is decompressed straight from the mapping.
-            return if map.starts_with(&ZSTD_MAGIC) {
-                let bytes = FileBytes::Read(decompress(path, &map)?);
-                decode_bytes(path, bytes, len, true)
-            } else {
-                decode_bytes(
-                    path,
-                    FileBytes::Mapped(std::sync::Arc::new(map)),
-                    len,
-                    false,
-                )
-            };
+    let bytes = crate::file_bytes::read_or_map(path).map_err(|e| Error::io(path, e))?;
+    match bytes {
+        // A compressed file is decompressed straight from the mapping.
+        FileBytes::Mapped(map) if map.starts_with(&ZSTD_MAGIC) => {
+            let bytes = FileBytes::Read(decompress(path, &map)?);
+            decode_bytes(path, bytes, map.len() as u64, true)
         }
+        FileBytes::Mapped(map) => {
+            let len = map.len() as u64;
+            decode_bytes(path, FileBytes::Mapped(map), len, false)
+        }
+        FileBytes::Read(data) => decode(path, data),
     }
-    let mut data = Vec::with_capacity(len as usize);
-    std::io::Read::read_to_end(&mut &file, &mut data).map_err(io)?;
-    decode(path, data)
 }
 
 /// Validates and decodes file bytes (`path` is only used in messages).

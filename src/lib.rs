@@ -9,6 +9,7 @@ pub mod evaluate;
 pub mod evaluate_indexed;
 pub mod evaluate_simd;
 pub mod exact;
+pub mod file_bytes;
 pub mod format;
 pub mod hardcases;
 mod hint;

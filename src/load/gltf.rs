@@ -16,12 +16,12 @@
 
 use super::{Part, Soup};
 use crate::error::{Error, Result};
+use crate::file_bytes::FileBytes;
 use base64::Engine as _;
 use gltf::json;
 use json::accessor::{ComponentType, Type};
 use json::mesh::{Mode, Semantic};
 use json::validation::{Checked, Validate as _};
-use std::borrow::Cow;
 use std::collections::BTreeSet;
 use std::path::Path;
 
@@ -38,7 +38,8 @@ const MAX_UNBACKED_COUNT: u64 = 1 << 26;
 /// How many validation problems an error message lists before "and N more".
 const MAX_LISTED_PROBLEMS: usize = 3;
 
-/// Loads a `.gltf` or `.glb` whose bytes are `data` into a world-space soup.
+/// Loads a `.gltf` or `.glb` whose bytes are `data` (read or mapped) into a
+/// world-space soup.
 ///
 /// `path` locates external buffers (relative URIs resolve against its
 /// directory) and names the file in errors. The default scene is used; without
@@ -54,7 +55,8 @@ const MAX_LISTED_PROBLEMS: usize = 3;
 /// accessor out of bounds, index out of range, recursive node graph, wrong
 /// accessor type, unsupported version or required geometry extension) is an
 /// [`Error::Input`]; NaN/Inf positions are passed through for later stages.
-pub fn load_gltf(path: &Path, data: Vec<u8>) -> Result<Soup> {
+pub fn load_gltf(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
+    let data: FileBytes = data.into();
     let mut warnings = Vec::new();
 
     let container = split_container(path, &data, &mut warnings)?;
@@ -88,7 +90,7 @@ pub fn load_gltf(path: &Path, data: Vec<u8>) -> Result<Soup> {
     // is computed beside the decoding when there are threads to spare (see
     // `digest_while`); the JSON parse before this point is small next to
     // the binary data.
-    let mut parts: Vec<&[u8]> = vec![&data];
+    let mut parts: Vec<&[u8]> = vec![&*data];
     parts.extend(external.iter().filter_map(|&b| ctx.buffers[b].as_deref()));
     let ((input_bytes, input_sha256), built) = super::digest_while(&parts, || {
         let mut soup = Soup::default();
@@ -891,6 +893,23 @@ fn collect_instances(
 // Buffers
 // ---------------------------------------------------------------------------
 
+/// A buffer's bytes: part of the file (a GLB's BIN chunk), or bytes of its
+/// own (a decoded data URI, or an external file, mapped when large).
+enum Buffer<'a> {
+    Part(&'a [u8]),
+    Own(FileBytes),
+}
+
+impl std::ops::Deref for Buffer<'_> {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Buffer::Part(b) => b,
+            Buffer::Own(b) => b,
+        }
+    }
+}
+
 /// Reads the buffers in `needed` (in index order, so the digest is
 /// deterministic) and checks each holds at least its declared byteLength.
 /// Pushes the index of every buffer read from a file to `external`, in the
@@ -901,16 +920,16 @@ fn load_buffers<'a>(
     glb_bin: Option<&'a [u8]>,
     needed: &BTreeSet<usize>,
     external: &mut Vec<usize>,
-) -> Result<Vec<Option<Cow<'a, [u8]>>>> {
-    let mut out: Vec<Option<Cow<'a, [u8]>>> = vec![None; root.buffers.len()];
+) -> Result<Vec<Option<Buffer<'a>>>> {
+    let mut out: Vec<Option<Buffer<'a>>> = (0..root.buffers.len()).map(|_| None).collect();
     for &b in needed {
         let (Some(buffer), Some(slot)) = (root.buffers.get(b), out.get_mut(b)) else {
             continue; // reported by check_references
         };
         let err = |m: String| Error::input(path, format!("buffer {b}: {m}"));
-        let (bytes, source): (Cow<'a, [u8]>, String) = match buffer.uri.as_deref() {
+        let (bytes, source): (Buffer<'a>, String) = match buffer.uri.as_deref() {
             None => match glb_bin {
-                Some(bin) if b == 0 => (Cow::Borrowed(bin), "GLB BIN chunk".to_string()),
+                Some(bin) if b == 0 => (Buffer::Part(bin), "GLB BIN chunk".to_string()),
                 Some(_) => {
                     return Err(err(
                         "has no uri; only buffer 0 of a .glb may refer to the BIN chunk"
@@ -925,7 +944,7 @@ fn load_buffers<'a>(
             },
             Some(uri) if has_prefix_ignore_case(uri, "data:") => {
                 let bytes = decode_data_uri(uri).map_err(|m| err(format!("data URI: {m}")))?;
-                (Cow::Owned(bytes), "data URI".to_string())
+                (Buffer::Own(bytes.into()), "data URI".to_string())
             }
             Some(uri) => {
                 if has_uri_scheme(uri) {
@@ -936,10 +955,10 @@ fn load_buffers<'a>(
                 let rel = String::from_utf8(percent_decode(uri))
                     .map_err(|_| err(format!("uri {uri:?} is not valid UTF-8 once decoded")))?;
                 let file = path.parent().unwrap_or(Path::new("")).join(&rel);
-                let bytes = std::fs::read(&file)
+                let bytes = crate::file_bytes::read_or_map(&file)
                     .map_err(|e| err(format!("cannot read {}: {e}", file.display())))?;
                 external.push(b);
-                (Cow::Owned(bytes), format!("{rel:?}"))
+                (Buffer::Own(bytes), format!("{rel:?}"))
             }
         };
         let declared = buffer.byte_length.0;
@@ -1074,6 +1093,60 @@ fn run<const N: usize, C: Component>(
     }
 }
 
+/// Reads the integer scalars of a dense accessor (`out.len()` elements,
+/// element `i` at `i * stride`) straight into `out`, for the unsigned
+/// component types indices may have; false (nothing written) for any other.
+///
+/// Why: the general path converts every value to f64 and back, with a
+/// bounds check per component, and on the 871k-triangle dragon that loop
+/// was the largest part of building the soup (a quarter of its profile
+/// samples). The values are the same: an unsigned integer converts to f64
+/// and back to u32 exactly.
+fn dense_indices(comp: ComponentType, bytes: &[u8], stride: usize, out: &mut [u32]) -> bool {
+    fn read<const S: usize>(
+        bytes: &[u8],
+        stride: usize,
+        out: &mut [u32],
+        conv: fn([u8; S]) -> u32,
+    ) {
+        if stride == S {
+            for (o, c) in out.iter_mut().zip(bytes.chunks_exact(S)) {
+                *o = conv(c.try_into().unwrap());
+            }
+        } else {
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = conv(bytes[i * stride..i * stride + S].try_into().unwrap());
+            }
+        }
+    }
+    match comp {
+        ComponentType::U8 => read::<1>(bytes, stride, out, |b| u32::from(b[0])),
+        ComponentType::U16 => read::<2>(bytes, stride, out, |b| u32::from(u16::from_le_bytes(b))),
+        ComponentType::U32 => read::<4>(bytes, stride, out, u32::from_le_bytes),
+        _ => return false,
+    }
+    true
+}
+
+/// Copies the f32 VEC3 elements of a dense accessor (`out.len()` of them,
+/// element `i` at `i * stride`) into `out`. The same values as the general
+/// path's f32 → f64 → f32, which is exact, without its per-component
+/// conversions and bounds checks (except that a signalling NaN keeps its
+/// bits here, where the round trip quiets it; both are rejected alike).
+fn dense_f32x3(bytes: &[u8], stride: usize, out: &mut [[f32; 3]]) {
+    let get = |b: &[u8]| f32::from_le_bytes(b.try_into().unwrap());
+    let one = |e: &[u8]| [get(&e[0..4]), get(&e[4..8]), get(&e[8..12])];
+    if stride == 12 {
+        for (o, e) in out.iter_mut().zip(bytes.chunks_exact(12)) {
+            *o = one(e);
+        }
+    } else {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = one(&bytes[i * stride..i * stride + 12]);
+        }
+    }
+}
+
 /// Dispatches on the component type once, so the per-element loop is
 /// monomorphic and tight.
 fn decode_elements<const N: usize>(
@@ -1145,7 +1218,7 @@ struct SparseSource<'s> {
 struct Ctx<'a> {
     path: &'a Path,
     root: &'a json::Root,
-    buffers: Vec<Option<Cow<'a, [u8]>>>,
+    buffers: Vec<Option<Buffer<'a>>>,
 }
 
 impl Ctx<'_> {
@@ -1341,6 +1414,36 @@ impl Ctx<'_> {
             &mut |j, v| sink(targets[j], v),
         );
         Ok(())
+    }
+
+    /// [`Ctx::decode`] of an indices accessor into `out` (`src.count`
+    /// long). A dense accessor without sparse entries is read straight into
+    /// `out` (`dense_indices`); anything else goes through `decode`.
+    fn decode_indices(&self, src: &Source<'_>, what: &str, out: &mut [u32]) -> Result<()> {
+        if let (Some((bytes, stride)), None) = (src.dense, &src.sparse)
+            && dense_indices(src.comp, bytes, stride, out)
+        {
+            return Ok(());
+        }
+        self.decode::<1>(src, what, &mut |i, v| out[i] = v[0] as u32)
+    }
+
+    /// [`Ctx::decode`] of a POSITION accessor into `out` (`src.count`
+    /// long), untransformed. A dense FLOAT accessor without sparse entries
+    /// is copied straight into `out` (`dense_f32x3`); anything else goes
+    /// through `decode`.
+    fn decode_positions(&self, src: &Source<'_>, what: &str, out: &mut [[f32; 3]]) -> Result<()> {
+        if let (Some((bytes, stride)), None, ComponentType::F32) =
+            (src.dense, &src.sparse, src.comp)
+        {
+            dense_f32x3(bytes, stride, out);
+            return Ok(());
+        }
+        // Also keeps an Inf coordinate from turning others into NaN
+        // through Inf * 0 terms (no transform here).
+        self.decode::<3>(src, what, &mut |i, v| {
+            out[i] = [v[0] as f32, v[1] as f32, v[2] as f32]
+        })
     }
 
     /// Resolves a POSITION accessor, insisting on VEC3 and a component type
@@ -1556,12 +1659,13 @@ fn build_soup(
                     let src = ctx.resolve_indices(ia, &what)?;
                     scratch.clear();
                     scratch.resize(src.count, 0);
-                    // Integer components convert to f64 and back exactly.
-                    ctx.decode::<1>(&src, &what, &mut |i, v| scratch[i] = v[0] as u32)?;
-                    if let Some((j, &bad)) = scratch
-                        .iter()
-                        .enumerate()
-                        .find(|(_, x)| **x as usize >= vcount)
+                    ctx.decode_indices(&src, &what, &mut scratch)?;
+                    // `max` vectorises; the search runs only on failure.
+                    if scratch.iter().max().is_some_and(|&m| m as usize >= vcount)
+                        && let Some((j, &bad)) = scratch
+                            .iter()
+                            .enumerate()
+                            .find(|(_, x)| **x as usize >= vcount)
                     {
                         return Err(ctx.err(format!(
                             "{what}: index {bad} (element {j} of indices accessor {ia}) is out of range; POSITION accessor {pos_acc} has {vcount} vertices"
@@ -1601,11 +1705,7 @@ fn build_soup(
             soup.positions.resize(base + vcount, [0.0; 3]);
             let out = &mut soup.positions[base..];
             if identity {
-                // Also keeps an Inf coordinate from turning others into NaN
-                // through Inf * 0 terms.
-                ctx.decode::<3>(&pos, &what, &mut |i, v| {
-                    out[i] = [v[0] as f32, v[1] as f32, v[2] as f32]
-                })?;
+                ctx.decode_positions(&pos, &what, out)?;
             } else {
                 let m = &inst.world;
                 ctx.decode::<3>(&pos, &what, &mut |i, v| out[i] = m.transform_point(v))?;
@@ -1626,7 +1726,12 @@ fn build_soup(
             })?;
             // `base + vcount` fits in u32 (checked above).
             let base32 = base as u32;
-            if prim.indices.is_some() {
+            if prim.indices.is_some() && mode == Mode::Triangles && !flip {
+                // The common case as one pass over a slice (which
+                // vectorises), not three pushes per triangle.
+                let idx = &scratch[..3 * tris];
+                soup.indices.extend(idx.iter().map(|&i| base32 + i));
+            } else if prim.indices.is_some() {
                 let idx = &scratch;
                 emit_triangles(mode, n, |i| base32 + idx[i], flip, &mut soup.indices);
             } else {
@@ -1659,6 +1764,70 @@ fn build_soup(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Deterministic bytes (xorshift), so failures reproduce.
+    fn noise(n: usize, mut x: u64) -> Vec<u8> {
+        (0..n)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn dense_fast_paths_read_what_the_general_path_reads() {
+        let count = 37;
+        for (comp, size) in [
+            (ComponentType::U8, 1),
+            (ComponentType::U16, 2),
+            (ComponentType::U32, 4),
+        ] {
+            // Tightly packed, and interleaved with other data.
+            for stride in [size, size + 3, 12] {
+                let bytes = noise(
+                    (count - 1) * stride + size,
+                    stride as u64 * 31 + size as u64,
+                );
+                let mut general = vec![0u32; count];
+                decode_elements::<1>(comp, false, &bytes, stride, count, &mut |i, v| {
+                    general[i] = v[0] as u32
+                });
+                let mut fast = vec![0u32; count];
+                assert!(dense_indices(comp, &bytes, stride, &mut fast));
+                assert_eq!(fast, general, "{comp:?}, stride {stride}");
+            }
+        }
+        // Not an index type: left to the general path.
+        let mut out = [7u32; 2];
+        assert!(!dense_indices(ComponentType::F32, &[0; 8], 4, &mut out));
+        assert_eq!(out, [7, 7]);
+
+        for stride in [12, 16, 28] {
+            // Any bits but NaNs, whose signalling bit the round trip may
+            // change (so NaNs are compared as NaNs).
+            let bytes = noise((count - 1) * stride + 12, stride as u64);
+            let mut general = vec![[0f32; 3]; count];
+            decode_elements::<3>(
+                ComponentType::F32,
+                false,
+                &bytes,
+                stride,
+                count,
+                &mut |i, v| general[i] = [v[0] as f32, v[1] as f32, v[2] as f32],
+            );
+            let mut fast = vec![[0f32; 3]; count];
+            dense_f32x3(&bytes, stride, &mut fast);
+            for (f, g) in fast.iter().flatten().zip(general.iter().flatten()) {
+                assert!(
+                    f.to_bits() == g.to_bits() || (f.is_nan() && g.is_nan()),
+                    "stride {stride}: {f} against {g}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn extension_classes() {

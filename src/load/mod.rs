@@ -9,6 +9,7 @@ pub mod gltf;
 pub mod obj;
 
 use crate::error::{Error, Result};
+use crate::file_bytes::FileBytes;
 use sha2::{Digest, Sha256};
 use std::path::Path;
 
@@ -163,9 +164,10 @@ pub fn detect_format(path: &Path, head: &[u8]) -> Result<Format> {
     }
 }
 
-/// Reads the whole file at `path`, mapping errors to [`Error::Io`].
-pub fn read_file(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| Error::io(path, e))
+/// The bytes of the file at `path`, mapped when large
+/// ([`crate::file_bytes::read_or_map`]), with errors as [`Error::Io`].
+pub fn read_file(path: &Path) -> Result<FileBytes> {
+    crate::file_bytes::read_or_map(path).map_err(|e| Error::io(path, e))
 }
 
 /// Loads a glTF or OBJ file into a world-space soup.

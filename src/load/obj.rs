@@ -57,10 +57,12 @@
 
 use super::{Part, Soup};
 use crate::error::{Error, Result};
+use crate::file_bytes::FileBytes;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 
-/// Loads a `.obj` whose bytes are `data`.
+/// Loads a `.obj` whose bytes are `data` (read or mapped; a mapping is
+/// copied only when the text needs rewriting, see `parse_owned`).
 ///
 /// Every object/group with triangles becomes a [`Part`] named `object "name"`
 /// (tobj's model name; consecutive models with the same name are merged).
@@ -76,7 +78,8 @@ use std::path::Path;
 ///
 /// The input's SHA-256 is computed beside the parse, on a second thread, when
 /// the calling rayon pool has more than one thread ([`super::digest_while`]).
-pub fn load_obj(path: &Path, data: Vec<u8>) -> Result<Soup> {
+pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
+    let data: FileBytes = data.into();
     // Hashing and parsing are independent; with more than one thread the
     // digest is computed beside the parse (see `digest_while`).
     let ((input_bytes, input_sha256), streamed) =
@@ -88,7 +91,7 @@ pub fn load_obj(path: &Path, data: Vec<u8>) -> Result<Soup> {
             drop(data);
             Ok(parsed)
         }
-        Ok(None) => guarded(|| parse_owned(data)),
+        Ok(None) => guarded(|| parse_owned(data.into_vec())),
         Err(msg) => Err(msg),
     };
     let mut soup = parsed
