@@ -110,7 +110,10 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
         return Err(Error::input(path, "index count is not a multiple of 3"));
     }
     let n = soup.positions.len();
-    let in_range = soup.indices.iter().max().is_none_or(|&m| (m as usize) < n);
+    // A fold, not `iter().max()`: that tracks a reference and does not
+    // vectorise.
+    let largest = soup.indices.iter().fold(0, |m, &i| m.max(i));
+    let in_range = soup.indices.is_empty() || (largest as usize) < n;
     let finite = |c: &[[f32; 3]]| {
         c.iter().fold(true, |ok, p| {
             ok & p[0].is_finite() & p[1].is_finite() & p[2].is_finite()
@@ -204,16 +207,21 @@ fn weld_and_topology(
     t: &mut Timings,
     stage: StageCallback<'_>,
 ) -> (Welded, Edges, topology::EdgeStats) {
-    let welded = timed_weld(soup, t, stage);
+    let welded = timed_weld(soup, true, t, stage);
     let (edges, es) = timed_topology(&welded, false, t, stage);
     (welded, edges, es)
 }
 
-/// Welds a checked soup, timed into `t`.
-fn timed_weld(soup: &Soup, t: &mut Timings, stage: StageCallback<'_>) -> Welded {
+/// Welds a checked soup, timed into `t`; with [`Welded::source_triangle`]
+/// only when `sources`.
+fn timed_weld(soup: &Soup, sources: bool, t: &mut Timings, stage: StageCallback<'_>) -> Welded {
     stage("weld");
     let i = Instant::now();
-    let welded = weld::weld(&soup.positions, &soup.indices);
+    let welded = if sources {
+        weld::weld(&soup.positions, &soup.indices)
+    } else {
+        weld::weld_without_sources(&soup.positions, &soup.indices)
+    };
     t.weld += ms(i);
     welded
 }
@@ -336,16 +344,16 @@ pub fn build_file_with(
         soup.positions = quantize::to_record_space(&soup.positions, &space, cfg.positions);
     }
     timings.weld = ms(quantise_start);
-    let mut welded = timed_weld(&soup, &mut timings, stage);
+    // Without the welded triangles' sources (for `lint` only).
+    let welded = timed_weld(&soup, false, &mut timings, stage);
     // (The one count of the soup the header needs that freeing it loses.)
     let input_triangles = soup.triangle_count();
     // What the rest of the build does not read is freed before topology
     // allocates, which then reuses those pages: the soup (the welded mesh
-    // replaces it) and the welded triangles' sources (for `lint` only).
-    // Faulting in pages the process has never touched is the slow part of
-    // a fresh buffer, especially in a VM (README, "Fifth round").
+    // replaces it). Faulting in pages the process has never touched is the
+    // slow part of a fresh buffer, especially in a VM (README, "Fifth
+    // round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
-    welded.source_triangle = Vec::new();
     // Nor does it read the opposite vertices' triangles.
     let (edges, es) = timed_topology(&welded, true, &mut timings, stage);
     stage("layout");

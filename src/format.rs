@@ -585,9 +585,15 @@ pub trait PayloadSource: Sync {
     /// Floats (in record space) that `unit` writes into `section`.
     fn floats(&self, unit: usize, section: usize) -> usize;
     /// Writes `unit`'s floats: `outs[s]` is its piece of section `s`,
-    /// [`PayloadSource::floats`]`(unit, s)` long.
+    /// [`PayloadSource::floats`]`(unit, s)` long. Every float must be
+    /// written: the pieces hold whatever an earlier unit left there.
     fn fill(&self, unit: usize, outs: &mut [&mut [f32]]);
 }
+
+/// A NaN no record holds, put in every float of a unit's pieces before
+/// [`PayloadSource::fill`] in debug builds, which then check that none is
+/// left.
+const UNWRITTEN: u32 = 0x7fa5_11ed;
 
 /// Writes `buf` at `offset` of `file`.
 fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()> {
@@ -672,8 +678,17 @@ pub fn write_file_streamed(
             || (Vec::<f32>::new(), Vec::<u8>::new()),
             |(fbuf, bbuf), u| {
                 let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
-                fbuf.clear();
-                fbuf.resize(lens.iter().sum(), 0.0);
+                // Not zeroed first: `fill` writes every float (which debug
+                // builds check with a sentinel). Zeroing was a memset of
+                // the whole output, 125 MB on the dragon.
+                let total = lens.iter().sum();
+                if fbuf.len() < total {
+                    fbuf.resize(total, 0.0);
+                }
+                let fbuf = &mut fbuf[..total];
+                if cfg!(debug_assertions) {
+                    fbuf.fill(f32::from_bits(UNWRITTEN));
+                }
                 let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
                 let mut rest = &mut fbuf[..];
                 for &n in &lens {
@@ -682,6 +697,10 @@ pub fn write_file_streamed(
                     rest = tail;
                 }
                 source.fill(u, &mut outs);
+                debug_assert!(
+                    fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
+                    "unit {u}: the payload source left floats unwritten"
+                );
                 let mut hashes = Vec::with_capacity(sections);
                 let mut at = 0;
                 for (s, &n) in lens.iter().enumerate() {

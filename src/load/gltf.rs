@@ -1660,8 +1660,10 @@ fn build_soup(
                     scratch.clear();
                     scratch.resize(src.count, 0);
                     ctx.decode_indices(&src, &what, &mut scratch)?;
-                    // `max` vectorises; the search runs only on failure.
-                    if scratch.iter().max().is_some_and(|&m| m as usize >= vcount)
+                    // A fold vectorises (`max()` tracks a reference and does
+                    // not); the search runs only on failure.
+                    if scratch.iter().fold(0, |m, &i| m.max(i)) as usize >= vcount
+                        && !scratch.is_empty()
                         && let Some((j, &bad)) = scratch
                             .iter()
                             .enumerate()
