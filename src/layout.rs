@@ -125,12 +125,18 @@ impl Plan {
         let block_counts: Vec<Vec<u64>> = (0..blocks)
             .into_par_iter()
             .map(|blk| {
+                // From the block's histogram of fans, whose common fans are
+                // summed in vector lanes: counting each edge into its bucket
+                // waited on the previous increment of the same counter,
+                // through memory (2.9 ms on the dragon, against 0.4 ms).
+                let end = ((blk + 1) * BLOCK).min(edges.len());
+                let hist = crate::topology::fan_histogram(&edges.opp_start[blk * BLOCK..=end]);
                 let mut counts = vec![0u64; k_max + 1];
-                for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
-                    let (full, rem) = split(edges.fan(e) as u32, max_mult);
-                    counts[k_max] += full as u64;
+                for (n, &c) in hist.iter().enumerate() {
+                    let (full, rem) = split(n as u32, max_mult);
+                    counts[k_max] += u64::from(full) * c;
                     if rem > 0 {
-                        counts[rem as usize] += 1;
+                        counts[rem as usize] += c;
                     }
                 }
                 counts
@@ -391,6 +397,50 @@ mod tests {
             for n in 0..3 * MAX_MAX_MULT + 2 {
                 assert_eq!(split(n, m), (n / m, n % m), "n {n}, K {m}");
             }
+        }
+    }
+
+    #[test]
+    fn plan_counts_every_block_as_a_walk_over_its_edges_does() {
+        // Fans of 1 to 17, mostly 2, over three blocks and a bit; one block
+        // holds fans of 1 and 2 only (the histogram's fast path).
+        let mut x = 0x9e37_79b9u32;
+        let mut starts = vec![0u32];
+        for e in 0..2 * BLOCK + BLOCK / 3 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let fan = match (e / BLOCK, x % 16) {
+                (1, 0..=3) => 1,
+                (1, _) => 2,
+                (_, 0) => 1 + x % 17,
+                (_, 1..=3) => 1,
+                _ => 2,
+            };
+            starts.push(starts.last().unwrap() + fan);
+        }
+        let edges = Edges {
+            opp_start: starts,
+            a: vec![0; 2 * BLOCK + BLOCK / 3],
+            ..Edges::default()
+        };
+        for k in [1, 2, 3, 5, 13] {
+            let plan = Plan::new(&edges, 0, k);
+            let mut total = vec![0u64; k as usize + 1];
+            for (blk, counts) in plan.block_counts.iter().enumerate() {
+                let mut walk = vec![0u64; k as usize + 1];
+                for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+                    let n = edges.fan(e) as u32;
+                    walk[k as usize] += u64::from(n / k);
+                    if !n.is_multiple_of(k) {
+                        walk[(n % k) as usize] += 1;
+                    }
+                }
+                assert_eq!(*counts, walk, "K {k}, block {blk}");
+                total.iter_mut().zip(&walk).for_each(|(t, w)| *t += w);
+            }
+            assert_eq!(plan.block_counts.len(), 3);
+            assert_eq!(plan.counts, total, "K {k}");
         }
     }
 

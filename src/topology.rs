@@ -462,7 +462,8 @@ pub fn edge_stats(edges: &Edges) -> EdgeStats {
 const STATS_BLOCK: usize = 1 << 16;
 
 /// `hist[n]` = edges with `n` opposite vertices, for the edges whose ranges
-/// `starts` bounds (one start more than edges).
+/// `starts` bounds (one start more than edges, fewer than 2^32 edges).
+/// Also the layout's counting pass (`layout::Plan::new`).
 ///
 /// Fans of one and two (almost every edge of a real mesh) are summed as
 /// comparisons in u32 lanes, which vectorise; only a block holding another
@@ -472,9 +473,9 @@ const STATS_BLOCK: usize = 1 << 16;
 /// memory), and so did the same sums in u64, which did not vectorise; u32
 /// sums take 0.7–0.9 ms (one thread, the stats called a second time on the
 /// same edges; local timers, not kept).
-fn fan_histogram(starts: &[u32]) -> Vec<u64> {
+pub(crate) fn fan_histogram(starts: &[u32]) -> Vec<u64> {
     let mut hist = vec![0u64; 3];
-    // u32 counts: a block has at most 2^16 edges.
+    // u32 counts: callers pass blocks of at most 2^16 edges.
     let (mut one, mut two, mut rare) = (0u32, 0u32, 0u32);
     for (&s, &e) in starts.iter().zip(&starts[1..]) {
         let n = e.wrapping_sub(s);
