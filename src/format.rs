@@ -517,16 +517,20 @@ pub fn container_len(header: &Header) -> u64 {
 
 /// A temporary file beside `path`, renamed onto it once complete, so that
 /// no reader ever sees a partial output.
+///
+/// Created with the permissions any new file gets (0666 less the umask, as
+/// `File::create` does), not the temp file default of 0600: the output is
+/// an asset other users and servers read, and the rename keeps the mode.
 fn temp_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    tempfile::Builder::new()
-        .prefix(".svpack-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| Error::io(path, e))
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".svpack-").suffix(".tmp");
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    builder.tempfile_in(dir).map_err(|e| Error::io(path, e))
 }
 
 /// Writes the file to `path` atomically (temp file in the same directory,

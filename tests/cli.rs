@@ -292,3 +292,32 @@ fn timings_threads_and_quiet_progress() {
         .code(0)
         .stderr(predicate::str::is_empty());
 }
+
+/// Outputs get the mode any new file gets (0666 less the umask), not the
+/// 0600 of the temp file they are written to before the rename.
+#[cfg(unix)]
+#[test]
+fn outputs_are_created_with_the_usual_file_mode() {
+    use std::os::unix::fs::PermissionsExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let cube = common::root().join("fixtures/cube.obj");
+    // What the umask makes of a plain new file, in the same directory.
+    let plain = tmp.path().join("plain.txt");
+    std::fs::write(&plain, "x").unwrap();
+    let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let expected = mode(&plain);
+    assert_ne!(expected, 0o600, "this test needs a umask other than 077");
+    // Streamed (uncompressed) and whole-buffer (compressed) writers.
+    for (name, args) in [("cube.svpk", &[][..]), ("cube_z.svpk", &["--compress"][..])] {
+        let out = tmp.path().join(name);
+        svpack()
+            .arg("build")
+            .arg(&cube)
+            .arg("-o")
+            .arg(&out)
+            .args(args)
+            .assert()
+            .code(0);
+        assert_eq!(mode(&out), expected, "{name}");
+    }
+}
