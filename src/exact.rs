@@ -60,6 +60,38 @@ const PERMS: [([usize; 4], i8); 24] = {
     out
 };
 
+/// Sign (−1, 0, +1) of `orient3d(t[0], t[1], t[2], d)` (the sign
+/// [`det4_sign`] gives for four points with `w = 1`) when the f64
+/// evaluation decides it, `None` otherwise.
+///
+/// This is the first stage of Shewchuk's adaptive predicate, as
+/// `robust::orient3d` computes it: the determinant of the differences to
+/// `d` in f64, and its sign when its magnitude exceeds
+/// `(7 + 56ε)ε` times the permanent (ε = 2^-53), the bound on that
+/// evaluation's error. Inline and with no exact stage, so the caller can
+/// fall back to [`det4_sign`] only for the rare undecided case.
+#[inline(always)]
+pub fn orient3d_filtered(t: [[f64; 3]; 3], d: [f64; 3]) -> Option<i32> {
+    const EPS: f64 = f64::EPSILON / 2.0;
+    const BOUND: f64 = (7.0 + 56.0 * EPS) * EPS;
+    let [a, b, c] = t.map(|p| [p[0] - d[0], p[1] - d[1], p[2] - d[2]]);
+    let (bxcy, cxby) = (b[0] * c[1], c[0] * b[1]);
+    let (cxay, axcy) = (c[0] * a[1], a[0] * c[1]);
+    let (axby, bxay) = (a[0] * b[1], b[0] * a[1]);
+    let det = a[2] * (bxcy - cxby) + b[2] * (cxay - axcy) + c[2] * (axby - bxay);
+    let permanent = (bxcy.abs() + cxby.abs()) * a[2].abs()
+        + (cxay.abs() + axcy.abs()) * b[2].abs()
+        + (axby.abs() + bxay.abs()) * c[2].abs();
+    let bound = BOUND * permanent;
+    if det > bound {
+        Some(1)
+    } else if -det > bound {
+        Some(-1)
+    } else {
+        None
+    }
+}
+
 /// Sign (−1, 0, +1) of `det[r0; r1; r2; r3]` (rows), exactly.
 ///
 /// With every `w` in {0, 1} (all the shadow check asks), row operations
@@ -452,6 +484,71 @@ mod tests {
             x ^= x << 17;
             x
         }
+    }
+
+    #[test]
+    fn orient3d_filtered_decides_only_what_the_exact_sign_says() {
+        let mut next = xorshift(0x5eed_0f0e_1e47);
+        let mut unit = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
+        let (mut decided, mut undecided) = (0, 0);
+        for i in 0..20_000 {
+            // A triangle and a point: exactly coplanar (on a tilted plane
+            // of small integers, on a corner, or all at one z), one f32 ulp
+            // off such a plane, near the plane within f32 rounding, or
+            // anywhere; at several scales.
+            let scale = [1e-3, 1.0, 1e3][i % 3];
+            let q = |v: f64| (v * scale) as f32;
+            // Integers below 2^21: the products of their differences
+            // outgrow f64's 53 bits, so the f64 determinant of coplanar
+            // points is often not exactly 0.
+            let int = |v: f64| (v * (1u32 << 21) as f64).floor() as f32;
+            let mut t: [[f32; 3]; 3] = std::array::from_fn(|_| [q(unit()), q(unit()), q(unit())]);
+            let mut l = [q(unit()), q(unit()), q(unit())];
+            match i % 6 {
+                0 | 1 => {
+                    // x + y + z = 2^23, exactly in f32.
+                    let on = |x: f32, y: f32| [x, y, (1u32 << 23) as f32 - x - y];
+                    t = std::array::from_fn(|_| on(int(unit()), int(unit())));
+                    l = on(int(unit()), int(unit()));
+                    if i % 6 == 1 {
+                        l[2] = f32::from_bits(l[2].to_bits() + 1);
+                    }
+                }
+                2 => l = t[i % 3],
+                3 => {
+                    let z = t[0][2];
+                    for c in &mut t {
+                        c[2] = z;
+                    }
+                    l[2] = z;
+                }
+                4 => {
+                    let (u, v) = (unit(), unit());
+                    l = std::array::from_fn(|a| {
+                        (t[0][a] as f64
+                            + u * (t[1][a] - t[0][a]) as f64
+                            + v * (t[2][a] - t[0][a]) as f64) as f32
+                    });
+                }
+                _ => {}
+            }
+            let f = t.map(|c| c.map(f64::from));
+            let lf = l.map(f64::from);
+            let w1 = |c: [f64; 3]| [c[0], c[1], c[2], 1.0];
+            let exact = det4_sign([w1(f[0]), w1(f[1]), w1(f[2]), w1(lf)]);
+            match orient3d_filtered(f, lf) {
+                Some(s) => {
+                    assert_eq!(s, exact, "case {i}: {t:?}, {l:?}");
+                    decided += 1;
+                }
+                None => undecided += 1,
+            }
+        }
+        // Both outcomes occur: the coplanar cases exercise the bound.
+        assert!(
+            decided > 9_000 && undecided > 3_000,
+            "{decided} / {undecided}"
+        );
     }
 
     #[test]

@@ -1162,16 +1162,33 @@ pub struct LightReport {
 
 /// Counts caps whose evaluated orientation differs from the exact orientation
 /// of the triangle towards the light.
+///
+/// For a point light, the f64 evaluation of the determinant decides the
+/// sign whenever it clears Shewchuk's error bound
+/// ([`crate::exact::orient3d_filtered`]), which is almost always; only the
+/// rest go to the exact [`crate::exact::det4_sign`]. Why: calling the exact
+/// predicate for each of the dragon's 871k triangles and 16 lights was 13%
+/// of `verify`'s profile samples.
 pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
     let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
     let l = light.map(|v| v as f64);
+    let point = light[3] == 1.0;
     d.caps
         .iter()
         .zip(&ev.caps)
         .filter(|(t, c)| {
             let p = t.map(|i| h(d.positions[i as usize]));
             // det[P0; P1; P2; L] = −N·(L − P0·w): negative when L sees (P0, P1, P2) counter-clockwise.
-            let exact = -crate::exact::det4_sign([p[0], p[1], p[2], l]);
+            // With every w = 1 it is orient3d(P0, P1, P2, L) (`det4_sign`).
+            let fast = point
+                .then(|| {
+                    crate::exact::orient3d_filtered(
+                        p.map(|q| [q[0], q[1], q[2]]),
+                        [l[0], l[1], l[2]],
+                    )
+                })
+                .flatten();
+            let exact = -fast.unwrap_or_else(|| crate::exact::det4_sign([p[0], p[1], p[2], l]));
             exact != **c as i32
         })
         .count() as u64
