@@ -372,7 +372,10 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     // statistics, and the bucket counts.
     g.bench_function(format!("ours_buckets/{n}"), |b| {
         b.iter(|| {
-            let w = weld::weld(black_box(&m.soup.positions), black_box(&m.soup.indices));
+            let w = weld::weld_without_sources(
+                black_box(&m.soup.positions),
+                black_box(&m.soup.indices),
+            );
             let e = topology::build_edges_opposites_only(&w.triangles, w.positions.len());
             let stats = topology::edge_stats(&e);
             let plan = layout::Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
