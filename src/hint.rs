@@ -7,12 +7,20 @@
 /// triangle signs (a table that mostly fits in L2) it made things slower.
 #[inline(always)]
 pub(crate) fn prefetch<T>(p: &T) {
+    prefetch_ptr(p as *const T)
+}
+
+/// [`prefetch`] of an address that need not be valid (it is never read):
+/// for a hint computed from values that may be stale, such as a slot one
+/// past the end of a buffer.
+#[inline(always)]
+pub(crate) fn prefetch_ptr<T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is a hint: it loads nothing into registers and
-    // never faults; SSE is part of x86-64.
+    // never faults, whatever the address; SSE is part of x86-64.
     unsafe {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        _mm_prefetch::<_MM_HINT_T0>((p as *const T).cast())
+        _mm_prefetch::<_MM_HINT_T0>(p.cast())
     };
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
