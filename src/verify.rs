@@ -1173,10 +1173,22 @@ pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
     let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
     let l = light.map(|v| v as f64);
     let point = light[3] == 1.0;
+    // The corners of the triangle AHEAD on are prefetched: the caps are in
+    // input order, scattered over a position table larger than L2.
+    const AHEAD: usize = 16;
+    let ahead = d.caps.get(AHEAD..).unwrap_or(&[]);
     d.caps
         .iter()
         .zip(&ev.caps)
-        .filter(|(t, c)| {
+        .enumerate()
+        .filter(|(i, (t, c))| {
+            if let Some(f) = ahead.get(*i) {
+                for &v in f {
+                    if let Some(q) = d.positions.get(v as usize) {
+                        crate::hint::prefetch(q);
+                    }
+                }
+            }
             let p = t.map(|i| h(d.positions[i as usize]));
             // det[P0; P1; P2; L] = −N·(L − P0·w): negative when L sees (P0, P1, P2) counter-clockwise.
             // With every w = 1 it is orient3d(P0, P1, P2, L) (`det4_sign`).
