@@ -66,29 +66,16 @@ const PERMS: [([usize; 4], i8); 24] = {
 ///
 /// This is the first stage of Shewchuk's adaptive predicate, as
 /// `robust::orient3d` computes it: the determinant of the differences to
-/// `d` in f64, and its sign when its magnitude exceeds
-/// `(7 + 56ε)ε` times the permanent (ε = 2^-53), the bound on that
-/// evaluation's error. Inline and with no exact stage, so the caller can
-/// fall back to [`det4_sign`] only for the rare undecided case.
+/// `d` in f64 ([`det3_sign_filtered`] with no slack, within
+/// [`DET3_BOUND`] of the permanent). Inline and with no exact stage, so
+/// the caller can fall back to [`det4_sign`] only for the rare undecided
+/// case. The entries must be f32 values (as [`DET3_BOUND`] requires).
 #[inline(always)]
-pub fn orient3d_filtered(t: [[f64; 3]; 3], d: [f64; 3]) -> Option<i32> {
-    const EPS: f64 = f64::EPSILON / 2.0;
-    const BOUND: f64 = (7.0 + 56.0 * EPS) * EPS;
+pub(crate) fn orient3d_filtered(t: [[f64; 3]; 3], d: [f64; 3]) -> Option<i32> {
     let [a, b, c] = t.map(|p| [p[0] - d[0], p[1] - d[1], p[2] - d[2]]);
-    let (bxcy, cxby) = (b[0] * c[1], c[0] * b[1]);
-    let (cxay, axcy) = (c[0] * a[1], a[0] * c[1]);
-    let (axby, bxay) = (a[0] * b[1], b[0] * a[1]);
-    let det = a[2] * (bxcy - cxby) + b[2] * (cxay - axcy) + c[2] * (axby - bxay);
-    let permanent = (bxcy.abs() + cxby.abs()) * a[2].abs()
-        + (cxay.abs() + axcy.abs()) * b[2].abs()
-        + (axby.abs() + bxay.abs()) * c[2].abs();
-    let bound = BOUND * permanent;
-    if det > bound {
-        Some(1)
-    } else if -det > bound {
-        Some(-1)
-    } else {
-        None
+    match det3_sign_filtered(a, b, c, 0.0) {
+        0 => None,
+        s => Some(s),
     }
 }
 

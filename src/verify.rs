@@ -1164,11 +1164,11 @@ pub struct LightReport {
 /// of the triangle towards the light.
 ///
 /// For a point light, the f64 evaluation of the determinant decides the
-/// sign whenever it clears Shewchuk's error bound
-/// ([`crate::exact::orient3d_filtered`]), which is almost always; only the
-/// rest go to the exact [`crate::exact::det4_sign`]. Why: calling the exact
-/// predicate for each of the dragon's 871k triangles and 16 lights was 13%
-/// of `verify`'s profile samples.
+/// sign whenever it clears Shewchuk's error bound (`orient3d_filtered` in
+/// [`crate::exact`]), which is almost always; only the rest go to the exact
+/// [`crate::exact::det4_sign`]. Why: calling the exact predicate for each
+/// of the dragon's 871k triangles and 16 lights was 13% of `verify`'s
+/// profile samples.
 pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
     let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
     let l = light.map(|v| v as f64);
