@@ -294,30 +294,32 @@ fn timings_threads_and_quiet_progress() {
 }
 
 /// Outputs get the mode any new file gets (0666 less the umask), not the
-/// 0600 of the temp file they are written to before the rename.
+/// 0600 of the temp file they are written to before the rename. The umask
+/// is set for the child alone, through `sh`, so the expected modes are
+/// exact whatever the test runner's umask.
 #[cfg(unix)]
 #[test]
 fn outputs_are_created_with_the_usual_file_mode() {
     use std::os::unix::fs::PermissionsExt;
     let tmp = tempfile::tempdir().unwrap();
     let cube = common::root().join("fixtures/cube.obj");
-    // What the umask makes of a plain new file, in the same directory.
-    let plain = tmp.path().join("plain.txt");
-    std::fs::write(&plain, "x").unwrap();
-    let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
-    let expected = mode(&plain);
-    assert_ne!(expected, 0o600, "this test needs a umask other than 077");
+    let bin = assert_cmd::cargo::cargo_bin("svpack");
     // Streamed (uncompressed) and whole-buffer (compressed) writers.
-    for (name, args) in [("cube.svpk", &[][..]), ("cube_z.svpk", &["--compress"][..])] {
-        let out = tmp.path().join(name);
-        svpack()
-            .arg("build")
-            .arg(&cube)
-            .arg("-o")
-            .arg(&out)
-            .args(args)
-            .assert()
-            .code(0);
-        assert_eq!(mode(&out), expected, "{name}");
+    for (umask, expected) in [("022", 0o644), ("027", 0o640), ("002", 0o664)] {
+        for (name, args) in [("cube.svpk", ""), ("cube_z.svpk", " --compress")] {
+            let out = tmp.path().join(format!("{umask}_{name}"));
+            let script = format!("umask {umask} && exec \"$0\" build \"$1\" -o \"$2\"{args}");
+            let status = std::process::Command::new("sh")
+                .args(["-c", &script])
+                .arg(&bin)
+                .arg(&cube)
+                .arg(&out)
+                .stdout(std::process::Stdio::null())
+                .status()
+                .unwrap();
+            assert!(status.success(), "{umask} {name}");
+            let mode = std::fs::metadata(&out).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode, expected, "umask {umask}, {name}: mode {mode:o}");
+        }
     }
 }
