@@ -66,13 +66,13 @@ impl Edges {
 ///
 /// 1. **Count** the listings per vertex (triangles cut into one chunk per
 ///    thread, each with its own counts). The counters of the triangle
-///    `AHEAD` triangles on are prefetched, here and in pass 2: the counts
-///    (4 bytes per vertex) outgrow L2 on large meshes and the corners are
-///    scattered (0.80–0.95 of the time without, dragon and 1M scene, 1 and
-///    2 threads, in an interleaved comparison not kept in the repo). Pass 2
-///    also prefetches the list slots it will write `AHEAD` triangles on:
-///    12.9–13.2 → 10.9–11.1 ms on the dragon, one thread (local timers,
-///    README "Ninth round").
+///    `AHEAD` triangles on are prefetched (in pass 2, 2·`AHEAD` on): the
+///    counts (4 bytes per vertex) outgrow L2 on large meshes and the
+///    corners are scattered (0.80–0.95 of the time without, dragon and 1M
+///    scene, 1 and 2 threads, in an interleaved comparison not kept in the
+///    repo). Pass 2 also prefetches the list slots it will write `AHEAD`
+///    triangles on: 12.9–13.2 → 10.9–11.1 ms on the dragon, one thread
+///    (local timers, README "Ninth round").
 /// 2. **List** every triangle under its `lo` and `mid` by the pair of its
 ///    other two corners: `[mid, hi]` under `lo`, `[hi, lo]` under `mid`
 ///    (8 bytes per listing, 2 per triangle; the pair's order tells the two

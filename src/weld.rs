@@ -515,7 +515,8 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
             Vec::new()
         }
     } else {
-        let mut source = Vec::with_capacity(if sources { triangle_count } else { 0 });
+        let kept_triangles = triangle_count - dropped.len();
+        let mut source = Vec::with_capacity(if sources { kept_triangles } else { 0 });
         let (mut begin, mut kept) = (0, 0);
         for end in dropped.iter().map(|&t| t as usize).chain([triangle_count]) {
             triangles.copy_within(3 * begin..3 * end, 3 * kept);
