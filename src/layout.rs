@@ -226,8 +226,8 @@ impl Plan {
             if e + AHEAD < end {
                 let (b, s) = (eb[e + AHEAD], starts[e + AHEAD] as usize);
                 prefetch(&pos[b as usize]);
-                prefetch(&pos[opp[s] as usize]);
-                if let Some(&o) = opp.get(s + 1) {
+                // (An edge built by hand may have no opposite vertex.)
+                for &o in opp.get(s..).unwrap_or(&[]).iter().take(2) {
                     prefetch(&pos[o as usize]);
                 }
             }
