@@ -208,42 +208,28 @@ impl Plan {
     /// K + 1 entries, entry 0 unused).
     pub fn fill_sides(&self, welded: &Welded, edges: &Edges, blk: usize, outs: &mut [&mut [f32]]) {
         let k_max = self.max_mult as usize;
-        let pos = &welded.positions[..];
-        let (ea, eb, starts, opp) = (
-            &edges.a[..],
-            &edges.b[..],
-            &edges.opp_start[..],
-            &edges.opp[..],
-        );
-        let end = ((blk + 1) * BLOCK).min(edges.len());
-        // Each bucket's piece as whole vec4s, filled front to back.
-        let mut outs: Vec<&mut [[f32; 4]]> = outs
-            .iter_mut()
-            .map(|o| bytemuck::cast_slice_mut(o))
-            .collect();
+        let pos = &welded.positions;
         let mut at = [0usize; MAX_MAX_MULT as usize + 1];
-        for e in blk * BLOCK..end {
-            if e + AHEAD < end {
-                let (b, s) = (eb[e + AHEAD], starts[e + AHEAD] as usize);
+        for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+            if let (Some(&b), Some(&s)) = (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD)) {
                 prefetch(&pos[b as usize]);
-                // (An edge built by hand may have no opposite vertex.)
-                for &o in opp.get(s..).unwrap_or(&[]).iter().take(2) {
+                for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
                     prefetch(&pos[o as usize]);
                 }
             }
-            let a = pos[ea[e] as usize];
-            let b = pos[eb[e] as usize];
-            let fan = &opp[starts[e] as usize..starts[e + 1] as usize];
-            let n = fan.len() as f32;
-            for chunk in fan.chunks(k_max) {
+            let a = pos[edges.a[e] as usize];
+            let b = pos[edges.b[e] as usize];
+            let opp = edges.opposites(e);
+            let n = opp.len() as f32;
+            for chunk in opp.chunks(k_max) {
                 let k = chunk.len();
-                let out = &mut outs[k][at[k]..at[k] + 2 + k];
-                at[k] += 2 + k;
-                out[0] = [a[0], a[1], a[2], k as f32];
-                out[1] = [b[0], b[1], b[2], n];
-                for (slot, &o) in out[2..].iter_mut().zip(chunk) {
+                let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
+                at[k] += (2 + k) * 4;
+                out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
+                out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
+                for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
                     let o = pos[o as usize];
-                    *slot = [o[0], o[1], o[2], 1.0];
+                    slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
                 }
             }
         }
