@@ -1,0 +1,156 @@
+//! Times single steps of a build or of `verify` that the whole-command
+//! benchmarks (`benches/compare_binaries.py`, `benches/compare_verify.py`)
+//! only see summed: the figures the README's ninth round quotes for them.
+//! Each step runs several times in one process and the fastest time is
+//! printed; build it at two commits and alternate the binaries to compare.
+//!
+//! ```text
+//! cargo run --release --example stage_probe -- read FILE     # read against map, first touch
+//! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
+//! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
+//! ```
+//!
+//! `build` and `verify` run on one thread (`RAYON_NUM_THREADS` overrides).
+//! Only APIs older than the ninth round are used, so the same file builds
+//! at earlier commits (copy it into a worktree) for the before figures; so
+//! the weld timed is `weld::weld`, with the triangle sources the build
+//! itself no longer makes.
+
+use std::path::Path;
+use std::time::Instant;
+
+#[global_allocator]
+static ALLOC: svpack::alloc::HugePageAlloc = svpack::alloc::HugePageAlloc;
+
+/// Fastest of `n` runs of `f`, in ms, and the last result.
+fn fastest<T>(n: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut best = f64::MAX;
+    let mut out = None;
+    for _ in 0..n {
+        let t = Instant::now();
+        let r = f();
+        best = best.min(t.elapsed().as_secs_f64() * 1e3);
+        out = Some(std::hint::black_box(r));
+    }
+    (best, out.unwrap())
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [what, file] = &args[..] else {
+        eprintln!("usage: stage_probe read|build|verify FILE");
+        std::process::exit(1);
+    };
+    let path = Path::new(file);
+    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build_global()
+            .unwrap();
+    }
+    match what.as_str() {
+        "read" => read(path),
+        "build" => build(path),
+        "verify" => verify(path),
+        _ => {
+            eprintln!("unknown step {what:?}: read, build or verify");
+            std::process::exit(1);
+        }
+    }
+}
+
+/// Opening and reading a file into fresh memory, then mapping it as
+/// `file_bytes::read_or_map` does (populated, read-only); once each, first
+/// (the fresh memory is the point), then 5 more times each.
+fn read(path: &Path) {
+    let time = |f: &dyn Fn() -> usize| {
+        let t = Instant::now();
+        let n = f();
+        (t.elapsed().as_secs_f64() * 1e3, n)
+    };
+    let by_read = || std::fs::read(path).unwrap().len();
+    let by_map = || {
+        let f = std::fs::File::open(path).unwrap();
+        // SAFETY: the file is not modified while mapped (a probe).
+        unsafe { memmap2::MmapOptions::new().populate().map(&f) }
+            .unwrap()
+            .len()
+    };
+    let (r, n) = time(&by_read);
+    let (m, _) = time(&by_map);
+    println!("{n} bytes, first time: read {r:.2} ms, mapped {m:.2} ms");
+    let (r, _) = fastest(5, by_read);
+    let (m, _) = fastest(5, by_map);
+    println!("then fastest of 5: read {r:.2} ms, mapped {m:.2} ms");
+}
+
+/// The build's steps after loading, each on the previous one's output.
+fn build(path: &Path) {
+    use svpack::layout::{DEFAULT_MAX_MULT, Plan};
+    let soup = svpack::load::load(path).unwrap();
+    let (weld_ms, w) = fastest(15, || svpack::weld::weld(&soup.positions, &soup.indices));
+    let (topo_ms, e) = fastest(15, || {
+        svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len())
+    });
+    let (plan_ms, plan) = fastest(30, || Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT));
+    // The fills into buffers reused from block to block, as the writer
+    // reuses its own: the largest block's size for every bucket.
+    let mut caps = vec![
+        0f32;
+        (0..plan.cap_blocks())
+            .map(|b| plan.cap_block_floats(b))
+            .max()
+            .unwrap_or(0)
+    ];
+    let (caps_ms, _) = fastest(15, || {
+        for b in 0..plan.cap_blocks() {
+            let n = plan.cap_block_floats(b);
+            plan.fill_caps(&w, b, &mut caps[..n]);
+        }
+    });
+    let widest = |k: u32| {
+        (0..plan.side_blocks())
+            .map(|b| plan.side_block_floats(b, k))
+            .max()
+            .unwrap_or(0)
+    };
+    let mut sides: Vec<Vec<f32>> = (0..=DEFAULT_MAX_MULT)
+        .map(|k| vec![0f32; widest(k)])
+        .collect();
+    let (sides_ms, _) = fastest(15, || {
+        for b in 0..plan.side_blocks() {
+            let mut outs: Vec<&mut [f32]> = (sides.iter_mut().enumerate())
+                .map(|(k, v)| &mut v[..plan.side_block_floats(b, k as u32)])
+                .collect();
+            plan.fill_sides(&w, &e, b, &mut outs);
+        }
+    });
+    println!(
+        "{} triangles: weld {weld_ms:.2} ms, topology {topo_ms:.2} ms, plan {plan_ms:.3} ms, \
+         caps fill {caps_ms:.2} ms, sides fill {sides_ms:.2} ms",
+        w.triangle_count()
+    );
+}
+
+/// `verify`'s orientation check for 12 point lights around the mesh, after
+/// decoding and evaluating once.
+fn verify(path: &Path) {
+    let file = svpack::format::read_file(path).unwrap();
+    let d = svpack::verify::decode(&file, 0);
+    let lights: Vec<[f32; 4]> = (0..12)
+        .map(|i| {
+            let a = i as f32 * 0.5;
+            [0.3 * a.cos(), 0.2, 0.3 * a.sin(), 1.0]
+        })
+        .collect();
+    let strategy = svpack::evaluate::Strategy::Reference;
+    let evs: Vec<_> = (lights.iter())
+        .map(|&l| svpack::verify::evaluate(&d, l, strategy))
+        .collect();
+    let (ms, errors) = fastest(5, || {
+        (lights.iter().zip(&evs))
+            .map(|(&l, ev)| svpack::verify::orientation_errors(&d, l, ev))
+            .sum::<u64>()
+    });
+    println!("orientation errors, 12 point lights: {ms:.1} ms ({errors} errors)");
+}
