@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """Alternates two svpack binaries on one input and compares their builds.
 
-Usage: python3 benches/compare_binaries.py [--allow-different] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
+Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
 
 Each round runs `build INPUT -o FRESH --timings --threads T --json` with
 T = 1 and 2, the two binaries back to back in alternating order (this
 machine drifts from minute to minute, so only interleaved runs are
-compared), with `sync` before each run and the output removed first. Prints,
+compared), with `sync` before each run and the output removed first (with
+--replace it is kept: each build replaces that binary's output of the
+previous run, as rebuilding in place does; an untimed build makes the first
+one). Prints,
 per binary and thread count, the fastest and median whole build, time after parsing
 (weld + topology + layout + write), of layout + write, and the largest peak
 memory; checks that both binaries wrote the same bytes in every run (with
@@ -20,8 +23,8 @@ import sys
 import tempfile
 
 
-def build(binary, inp, out, threads):
-    if os.path.exists(out):
+def build(binary, inp, out, threads, replace=False):
+    if os.path.exists(out) and not replace:
         os.remove(out)
     subprocess.run(["sync"], check=True)
     run = subprocess.run(
@@ -36,7 +39,8 @@ def build(binary, inp, out, threads):
 def main():
     args = sys.argv[1:]
     allow_different = "--allow-different" in args
-    args = [a for a in args if a != "--allow-different"]
+    replace = "--replace" in args
+    args = [a for a in args if a not in ("--allow-different", "--replace")]
     if len(args) not in (3, 4):
         sys.exit(__doc__)
     old, new, inp = args[:3]
@@ -45,12 +49,16 @@ def main():
     bins = {"old": old, "new": new}
     res = {}
     with tempfile.TemporaryDirectory(dir=os.path.dirname(os.path.abspath(inp))) as work:
+        if replace:
+            for name in bins:
+                build(bins[name], inp, os.path.join(work, name + ".svpk"), 2)
         for r in range(rounds):
             for t in (1, 2):
                 outs = {}
                 for name in (["old", "new"] if r % 2 == 0 else ["new", "old"]):
                     outs[name] = os.path.join(work, name + ".svpk")
-                    res.setdefault((name, t), []).append(build(bins[name], inp, outs[name], t))
+                    res.setdefault((name, t), []).append(
+                        build(bins[name], inp, outs[name], t, replace))
                 with open(outs["old"], "rb") as a, open(outs["new"], "rb") as b:
                     if a.read() != b.read():
                         if not allow_different:

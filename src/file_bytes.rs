@@ -10,8 +10,8 @@
 //!
 //! Like any reader of a mapped file, this assumes no other process rewrites
 //! or truncates the file in place while it is mapped (svpack itself never
-//! does: it writes a temp file and renames it over the old one, whose
-//! mapping keeps the old bytes).
+//! does: it writes a temp file and renames or swaps it into the old one's
+//! place, and a mapping of the old file keeps the old bytes).
 
 use std::path::Path;
 

@@ -533,8 +533,70 @@ fn temp_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
     builder.tempfile_in(dir).map_err(|e| Error::io(path, e))
 }
 
+/// Puts the complete temp file `tmp` (from [`temp_beside`]) at `path`: a
+/// rename, except that on Linux an existing regular file at `path` is
+/// swapped out (`renameat2` with `RENAME_EXCHANGE`) and then removed.
+///
+/// Why: on ext4 (its default `auto_da_alloc`), a rename that replaces a
+/// file makes the rename call itself start writeback of the new file's
+/// data, allocating its blocks and submitting its I/O: 66–73 ms for a
+/// 120 MiB file here, on top of the 24 ms of freeing the old file. A build
+/// into a fresh path pays neither; rebuilding in place, what a pipeline
+/// does every time, paid both. The exchange is just as atomic for readers
+/// (`path` always names the old or the new complete file, never nothing),
+/// and leaves the new data to the kernel's flusher threads, as for a new
+/// file. What it gives up is that heuristic's partial protection against
+/// power loss right after the build, which a new output never had either
+/// (svpack does not fsync: a pipeline reruns the build).
+///
+/// Anything else at `path` (nothing, a directory, a symlink) and any
+/// filesystem without the exchange get the plain rename, with its usual
+/// errors and semantics (a symlink is replaced, not followed).
+fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
+    #[cfg(target_os = "linux")]
+    if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_file())
+        && exchange(tmp.path(), path).is_ok()
+    {
+        // `tmp`'s path now names the old file: remove it. (Were `path`
+        // replaced by a directory between the check and the exchange, this
+        // fails on the directory, which is left beside the output and named
+        // in the error.)
+        let old = tmp.path().to_path_buf();
+        return tmp.close().map_err(|e| Error::io(&old, e));
+    }
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// Atomically swaps the directory entries `a` and `b` (both must exist).
+#[cfg(target_os = "linux")]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| std::ffi::CString::new(p.as_os_str().as_bytes());
+    let (a, b) = (c(a)?, c(b)?);
+    // The raw system call rather than libc's wrapper, which older glibc and
+    // some musl versions lack; kernels before 3.15 or filesystems without
+    // the flag fail with ENOSYS or EINVAL, and the caller renames instead.
+    // SAFETY: two NUL-terminated paths that outlive the call.
+    let rc = unsafe {
+        libc::syscall(
+            libc::SYS_renameat2,
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 /// Writes the file to `path` atomically (temp file in the same directory,
-/// then rename), optionally zstd-wrapped. Returns the final header and the
+/// then renamed or swapped in, see `persist`), optionally zstd-wrapped. Returns the final header and the
 /// number of bytes on disk.
 pub fn write_file(
     path: &Path,
@@ -573,7 +635,7 @@ pub fn write_file(
         .metadata()
         .map_err(|e| Error::io(path, e))?
         .len();
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    persist(tmp, path)?;
     Ok((header, size))
 }
 
@@ -748,7 +810,7 @@ pub fn write_file_streamed(
     }
     write_at(file, &preamble(&hbytes), 0).map_err(|e| Error::io(path, e))?;
     write_at(file, &hbytes, PREAMBLE_LEN as u64).map_err(|e| Error::io(path, e))?;
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    persist(tmp, path)?;
     Ok((header, size))
 }
 
@@ -1092,6 +1154,46 @@ pub fn zstd_size(file: &SvpkFile) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `persist` onto a directory fails like a rename (naming the path) and
+    /// leaves the directory and its contents alone, with no temp file left;
+    /// onto nothing and onto a regular file it puts the temp file's bytes
+    /// at the path, and the replaced file lives on under its other links.
+    /// Caught: an exchange tried without checking what is at the path
+    /// (the directory ends up under the temp name).
+    #[cfg(unix)]
+    #[test]
+    fn persist_replaces_files_whole_and_leaves_directories_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let put = |path: &Path, bytes: &[u8]| -> Result<()> {
+            let mut tmp = temp_beside(path)?;
+            tmp.write_all(bytes).unwrap();
+            persist(tmp, path)
+        };
+        let names = || -> Vec<String> {
+            let mut v: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        let out = dir.path().join("o.svpk");
+        put(&out, b"first").unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"first");
+        std::fs::hard_link(&out, dir.path().join("link")).unwrap();
+        put(&out, b"second").unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"second");
+        assert_eq!(std::fs::read(dir.path().join("link")).unwrap(), b"first");
+
+        let d = dir.path().join("d.svpk");
+        std::fs::create_dir(&d).unwrap();
+        std::fs::write(d.join("keep"), b"x").unwrap();
+        let err = put(&d, b"third").unwrap_err().to_string();
+        assert!(err.contains("d.svpk"), "{err}");
+        assert!(d.join("keep").is_file());
+        assert_eq!(names(), ["d.svpk", "link", "o.svpk"]);
+    }
 
     #[test]
     fn parallel_crc_is_the_crc_of_the_written_bytes() {

@@ -323,3 +323,88 @@ fn outputs_are_created_with_the_usual_file_mode() {
         }
     }
 }
+
+/// Rebuilding over an existing output, which on Linux swaps the new file in
+/// (`renameat2` with `RENAME_EXCHANGE`) and removes the old one, must behave
+/// as the plain rename did: the path gets the new bytes, a hard link to the
+/// old file keeps the old bytes, a symlink at the path is replaced (its
+/// target untouched), and no temp file is left behind; for the streamed and
+/// the compressed writer. (A directory given as `-o` receives the output
+/// inside it; `format::tests` checks `persist` itself with one.)
+#[cfg(unix)]
+#[test]
+fn rebuilding_in_place_replaces_the_output_whole() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let root = common::root();
+    let (cube, tets) = (
+        root.join("fixtures/cube.obj"),
+        root.join("fixtures/two_tets.obj"),
+    );
+    for (compress, suffix) in [(false, ""), (true, "_z")] {
+        let build = |input: &std::path::Path, out: &std::path::Path| {
+            let mut c = svpack();
+            c.arg("build").arg(input).arg("-o").arg(out).arg("-q");
+            if compress {
+                c.arg("--compress");
+            }
+            c.assert()
+        };
+        // The bytes each input gives, built into fresh paths.
+        let (want_cube, want_tets) = (
+            dir.join(format!("want_cube{suffix}")),
+            dir.join(format!("want_tets{suffix}")),
+        );
+        build(&cube, &want_cube).success();
+        build(&tets, &want_tets).success();
+        let (want_cube, want_tets) = (
+            std::fs::read(&want_cube).unwrap(),
+            std::fs::read(&want_tets).unwrap(),
+        );
+        assert_ne!(want_cube, want_tets);
+
+        // A regular file, hard-linked elsewhere.
+        let out = dir.join(format!("out{suffix}.svpk"));
+        let link = dir.join(format!("link{suffix}"));
+        build(&cube, &out).success();
+        std::fs::hard_link(&out, &link).unwrap();
+        build(&tets, &out).success();
+        assert!(
+            std::fs::read(&out).unwrap() == want_tets,
+            "new bytes in place"
+        );
+        assert!(
+            std::fs::read(&link).unwrap() == want_cube,
+            "old file kept by its link"
+        );
+        build(&cube, &out).success();
+        assert!(std::fs::read(&out).unwrap() == want_cube, "and back");
+
+        // A symlink: replaced by the output, its target untouched.
+        let target = dir.join(format!("target{suffix}"));
+        let sym = dir.join(format!("sym{suffix}.svpk"));
+        std::fs::write(&target, b"not an svpk").unwrap();
+        std::os::unix::fs::symlink(&target, &sym).unwrap();
+        build(&tets, &sym).success();
+        assert!(
+            std::fs::symlink_metadata(&sym)
+                .unwrap()
+                .file_type()
+                .is_file()
+        );
+        assert!(std::fs::read(&sym).unwrap() == want_tets);
+        assert_eq!(std::fs::read(&target).unwrap(), b"not an svpk");
+    }
+    let mut allowed = vec![];
+    for s in ["", "_z"] {
+        allowed.extend([
+            format!("want_cube{s}"),
+            format!("want_tets{s}"),
+            format!("out{s}.svpk"),
+            format!("link{s}"),
+            format!("target{s}"),
+            format!("sym{s}.svpk"),
+        ]);
+    }
+    no_stray_files(dir, &allowed.iter().map(String::as_str).collect::<Vec<_>>());
+}
