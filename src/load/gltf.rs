@@ -1652,19 +1652,39 @@ fn build_soup(
             let vcount = pos.count;
 
             // Indices first: an out-of-range index rejects the file before
-            // we spend memory on its positions.
+            // we spend memory on its positions. A plain triangle list is
+            // decoded straight onto the end of the soup's indices, where it
+            // stays (its vertex offset added in place below); anything else
+            // into `scratch`. Why: a copy of the largest array of the load
+            // (10 MB of fresh memory for the 871k-triangle dragon) and a
+            // pass over it.
+            let direct = prim.indices.is_some() && mode == Mode::Triangles && !flip;
+            let first = soup.indices.len() / 3;
             let n = match prim.indices {
                 Some(ia) => {
                     let ia = ia.value();
                     let src = ctx.resolve_indices(ia, &what)?;
-                    scratch.clear();
-                    scratch.resize(src.count, 0);
-                    ctx.decode_indices(&src, &what, &mut scratch)?;
+                    let buf = if direct {
+                        &mut soup.indices
+                    } else {
+                        scratch.clear();
+                        &mut scratch
+                    };
+                    let at = buf.len();
+                    buf.try_reserve(src.count).map_err(|_| {
+                        ctx.err(format!(
+                            "out of memory reserving {} indices for {what}",
+                            src.count
+                        ))
+                    })?;
+                    buf.resize(at + src.count, 0);
+                    let decoded = &mut buf[at..];
+                    ctx.decode_indices(&src, &what, decoded)?;
                     // A fold vectorises (`max()` tracks a reference and does
                     // not); the search runs only on failure.
-                    if scratch.iter().fold(0, |m, &i| m.max(i)) as usize >= vcount
-                        && !scratch.is_empty()
-                        && let Some((j, &bad)) = scratch
+                    if decoded.iter().fold(0, |m, &i| m.max(i)) as usize >= vcount
+                        && !decoded.is_empty()
+                        && let Some((j, &bad)) = decoded
                             .iter()
                             .enumerate()
                             .find(|(_, x)| **x as usize >= vcount)
@@ -1673,7 +1693,7 @@ fn build_soup(
                             "{what}: index {bad} (element {j} of indices accessor {ia}) is out of range; POSITION accessor {pos_acc} has {vcount} vertices"
                         )));
                     }
-                    scratch.len()
+                    src.count
                 }
                 None => vcount,
             };
@@ -1714,25 +1734,30 @@ fn build_soup(
             }
 
             let tris = triangle_count(mode, n);
-            let first = soup.indices.len() / 3;
             if first + tris > u32::MAX as usize {
                 return Err(ctx.err(format!(
                     "more than {} triangles after instancing (at {what})",
                     u32::MAX
                 )));
             }
-            soup.indices.try_reserve(tris * 3).map_err(|_| {
-                ctx.err(format!(
-                    "out of memory reserving {tris} triangles for {what}"
-                ))
-            })?;
+            if !direct {
+                soup.indices.try_reserve(tris * 3).map_err(|_| {
+                    ctx.err(format!(
+                        "out of memory reserving {tris} triangles for {what}"
+                    ))
+                })?;
+            }
             // `base + vcount` fits in u32 (checked above).
             let base32 = base as u32;
-            if prim.indices.is_some() && mode == Mode::Triangles && !flip {
-                // The common case as one pass over a slice (which
-                // vectorises), not three pushes per triangle.
-                let idx = &scratch[..3 * tris];
-                soup.indices.extend(idx.iter().map(|&i| base32 + i));
+            if direct {
+                // Already in place: drop a leftover index or two, and
+                // offset the rest in one pass (which vectorises).
+                soup.indices.truncate(3 * (first + tris));
+                if base32 != 0 {
+                    soup.indices[3 * first..]
+                        .iter_mut()
+                        .for_each(|i| *i += base32);
+                }
             } else if prim.indices.is_some() {
                 let idx = &scratch;
                 emit_triangles(mode, n, |i| base32 + idx[i], flip, &mut soup.indices);
