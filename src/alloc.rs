@@ -17,6 +17,19 @@
 //! computes, and a kernel without THP ignores it. On other systems the
 //! allocator is exactly `System`.
 //!
+//! **Freed large blocks are kept for reuse** ([`CACHE_SLOTS`] of them, at
+//! most [`CACHE_BYTES`] in all) instead of being unmapped at once. Why: a
+//! build frees big buffers between stages (the soup after welding, the
+//! topology's listing after the edges are made) and allocates new ones
+//! right after, and every fresh page is a fault and a page zeroed by the
+//! kernel; on the dragon the topology stage spent 11 of its 40 ms in the
+//! kernel's `clear_page_erms` (`perf record` of `examples/stage_probe.rs`).
+//! A kept block is handed out again (cut to size, or grown in place with
+//! `mremap`, which keeps its pages), zeroed by a `memset` only when the
+//! caller asks for zeroed memory, as `vec![0; n]` does. glibc's malloc keeps
+//! freed memory in the same way for blocks below its mmap threshold, so
+//! this only gives large blocks what small ones already had.
+//!
 //! The `svpack` binary and the benchmarks install it with
 //! `#[global_allocator]`; library users choose their own allocator.
 
@@ -28,6 +41,91 @@ pub const HUGE_MIN: usize = 2 << 20;
 
 /// Large blocks' alignment limit: `mmap` returns page-aligned memory.
 const PAGE: usize = 4096;
+
+/// Most freed large blocks kept for reuse (see the module documentation).
+pub const CACHE_SLOTS: usize = 8;
+
+/// Most bytes of freed large blocks kept for reuse: above this, a freed
+/// block is unmapped at once.
+pub const CACHE_BYTES: usize = 256 << 20;
+
+/// Freed large blocks, `(address, span)`; span 0 marks a free slot. A lock
+/// around an array: `std::sync::Mutex` never allocates (it is a futex), so
+/// it is usable inside an allocator, and large blocks are few and big, so
+/// the lock is never contended for long.
+#[cfg(target_os = "linux")]
+static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
+    std::sync::Mutex::new([(0, 0); CACHE_SLOTS]);
+
+/// Keeps the freed block `p` (a mapping of `span` bytes) for reuse if a slot
+/// is free and the cache stays within [`CACHE_BYTES`]; false otherwise.
+#[cfg(target_os = "linux")]
+fn keep(p: *mut u8, span: usize) -> bool {
+    let Ok(mut cache) = CACHE.lock() else {
+        return false;
+    };
+    let held: usize = cache.iter().map(|c| c.1).sum();
+    if held + span > CACHE_BYTES {
+        return false;
+    }
+    match cache.iter_mut().find(|c| c.1 == 0) {
+        Some(slot) => {
+            *slot = (p as usize, span);
+            true
+        }
+        None => false,
+    }
+}
+
+/// A kept block for a request of `span` bytes, taken out of the cache: the
+/// smallest one at least that long, else the longest one (which the caller
+/// grows). `None` if the cache is empty.
+#[cfg(target_os = "linux")]
+fn take(span: usize) -> Option<(*mut u8, usize)> {
+    let mut cache = CACHE.lock().ok()?;
+    let held = || (0..CACHE_SLOTS).filter(|&i| cache[i].1 > 0);
+    let pick = held()
+        .filter(|&i| cache[i].1 >= span)
+        .min_by_key(|&i| cache[i].1)
+        .or_else(|| held().max_by_key(|&i| cache[i].1))?;
+    let (p, s) = std::mem::replace(&mut cache[pick], (0, 0));
+    Some((p as *mut u8, s))
+}
+
+/// A large block of exactly `span` bytes (a mapping), reused from the cache
+/// when it holds one, else freshly mapped; with `zeroed`, its first `size`
+/// bytes are zero. Null on failure.
+#[cfg(target_os = "linux")]
+fn large_block(span: usize, size: usize, zeroed: bool) -> *mut u8 {
+    let Some((p, s)) = take(span) else {
+        // Fresh anonymous mappings are zero.
+        return sys::map(span);
+    };
+    let p = if s > span {
+        // Cut to size: the tail goes back to the system.
+        // SAFETY: `p..p + s` is a mapping this allocator owns.
+        unsafe { sys::unmap(p.add(span), s - span) };
+        p
+    } else if s < span {
+        // Grown: the kept pages stay, the new tail is fresh (and zero).
+        // SAFETY: as above.
+        let q = unsafe { sys::remap(p, s, span) };
+        if q.is_null() {
+            // SAFETY: as above; the block is not handed out.
+            unsafe { sys::unmap(p, s) };
+            return sys::map(span);
+        }
+        q
+    } else {
+        p
+    };
+    if zeroed {
+        // Only the reused pages can hold old data.
+        // SAFETY: `p` is valid for `span >= size` bytes.
+        unsafe { std::ptr::write_bytes(p, 0, size.min(s)) };
+    }
+    p
+}
 
 /// [`System`] for small blocks; on Linux, its own anonymous mapping with the
 /// `MADV_HUGEPAGE` hint for blocks of at least [`HUGE_MIN`] bytes (see the
@@ -125,6 +223,16 @@ mod sys {
     }
 }
 
+#[cfg(not(target_os = "linux"))]
+fn keep(_: *mut u8, _: usize) -> bool {
+    unreachable!("large blocks use System off Linux")
+}
+
+#[cfg(not(target_os = "linux"))]
+fn large_block(_: usize, _: usize, _: bool) -> *mut u8 {
+    unreachable!("large blocks use System off Linux")
+}
+
 // SAFETY: small blocks are System's; large blocks are whole mappings, which
 // are page-aligned (so every alignment up to PAGE holds) and zeroed, and are
 // only ever released or resized here (`is_large` of the layout the caller
@@ -134,7 +242,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     #[inline]
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if is_large(layout.size(), layout.align()) {
-            sys::map(span(layout.size()))
+            large_block(span(layout.size()), layout.size(), false)
         } else {
             // SAFETY: the caller's contract.
             unsafe { System.alloc(layout) }
@@ -144,8 +252,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     #[inline]
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         if is_large(layout.size(), layout.align()) {
-            // Fresh anonymous mappings are zero.
-            sys::map(span(layout.size()))
+            large_block(span(layout.size()), layout.size(), true)
         } else {
             // SAFETY: the caller's contract.
             unsafe { System.alloc_zeroed(layout) }
@@ -155,8 +262,11 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     #[inline]
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         if is_large(layout.size(), layout.align()) {
-            // SAFETY: large blocks are mappings of exactly this size.
-            unsafe { sys::unmap(ptr, span(layout.size())) }
+            let span = span(layout.size());
+            if !keep(ptr, span) {
+                // SAFETY: large blocks are mappings of exactly this size.
+                unsafe { sys::unmap(ptr, span) }
+            }
         } else {
             // SAFETY: the caller's contract.
             unsafe { System.dealloc(ptr, layout) }
@@ -194,8 +304,82 @@ unsafe impl GlobalAlloc for HugePageAlloc {
 mod tests {
     use super::*;
 
+    /// The cache is one for the process: tests that use it run one at a time.
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+    /// Blocks and bytes the cache holds.
+    #[cfg(target_os = "linux")]
+    fn cached() -> (usize, usize) {
+        let cache = CACHE.lock().unwrap();
+        let held = cache.iter().filter(|c| c.1 > 0);
+        (held.clone().count(), held.map(|c| c.1).sum())
+    }
+
+    /// A freed block comes back for the next large request, cut to size,
+    /// grown, or whole, and `alloc_zeroed` never shows its old bytes; the
+    /// cache keeps no more than its limits. Caught: a reused block not
+    /// zeroed, and a grown block cut to its old length (the write at its
+    /// end faults).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn freed_blocks_are_reused_and_zeroed_on_request() {
+        let _serial = SERIAL.lock().unwrap();
+        let a = HugePageAlloc;
+        let lay = |size| Layout::from_size_align(size, 8).unwrap();
+        // Start from an empty cache.
+        while let Some((p, s)) = take(0) {
+            unsafe { sys::unmap(p, s) };
+        }
+        for (first, second) in [
+            (3 * HUGE_MIN, 3 * HUGE_MIN),     // same span
+            (5 * HUGE_MIN, 2 * HUGE_MIN + 1), // cut
+            (HUGE_MIN, 6 * HUGE_MIN - 4),     // grown
+        ] {
+            unsafe {
+                let p = a.alloc(lay(first));
+                std::slice::from_raw_parts_mut(p, first).fill(0xab);
+                a.dealloc(p, lay(first));
+                assert_eq!(cached(), (1, span(first)));
+                let q = a.alloc_zeroed(lay(second));
+                assert_eq!(cached(), (0, 0), "the block was taken");
+                let s = std::slice::from_raw_parts_mut(q, second);
+                assert!(s.iter().all(|&b| b == 0), "{first} -> {second}");
+                s.fill(1);
+                a.dealloc(q, lay(second));
+                // Not zeroed: usable to its end.
+                let r = a.alloc(lay(second));
+                *r.add(second - 1) = 2;
+                a.dealloc(r, lay(second));
+                let (p, s) = take(0).unwrap();
+                sys::unmap(p, s);
+            }
+        }
+        // Limits: at most CACHE_SLOTS blocks and CACHE_BYTES bytes.
+        let big = CACHE_BYTES / 2 + HUGE_MIN;
+        unsafe {
+            let blocks: Vec<*mut u8> = (0..3).map(|_| a.alloc(lay(big))).collect();
+            for &p in &blocks {
+                a.dealloc(p, lay(big));
+            }
+            assert_eq!(cached(), (1, span(big)));
+            let (p, s) = take(0).unwrap();
+            sys::unmap(p, s);
+            let blocks: Vec<*mut u8> = (0..CACHE_SLOTS + 2)
+                .map(|_| a.alloc(lay(HUGE_MIN)))
+                .collect();
+            for &p in &blocks {
+                a.dealloc(p, lay(HUGE_MIN));
+            }
+            assert_eq!(cached(), (CACHE_SLOTS, CACHE_SLOTS * HUGE_MIN));
+            while let Some((p, s)) = take(0) {
+                sys::unmap(p, s);
+            }
+        }
+    }
+
     #[test]
     fn large_and_small_blocks_round_trip() {
+        let _serial = SERIAL.lock().unwrap();
         let a = HugePageAlloc;
         for size in [16, HUGE_MIN - 1, HUGE_MIN, 3 * HUGE_MIN + 123] {
             let layout = Layout::from_size_align(size, 64).unwrap();
@@ -216,6 +400,7 @@ mod tests {
 
     #[test]
     fn large_mappings_are_whole_huge_pages() {
+        let _serial = SERIAL.lock().unwrap();
         assert_eq!(span(HUGE_MIN), HUGE_MIN);
         assert_eq!(span(HUGE_MIN + 1), 2 * HUGE_MIN);
         assert_eq!(span(7 * HUGE_MIN / 2), 4 * HUGE_MIN);
