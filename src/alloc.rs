@@ -88,7 +88,7 @@ fn take(span: usize) -> Option<(*mut u8, usize)> {
         .filter(|&i| cache[i].1 >= span)
         .min_by_key(|&i| cache[i].1)
         .or_else(|| held().max_by_key(|&i| cache[i].1))?;
-    let (p, s) = std::mem::replace(&mut cache[pick], (0, 0));
+    let (p, s) = std::mem::take(&mut cache[pick]);
     Some((p as *mut u8, s))
 }
 
