@@ -17,8 +17,10 @@
 //! computes, and a kernel without THP ignores it. On other systems the
 //! allocator is exactly `System`.
 //!
-//! **Freed large blocks are kept for reuse** ([`CACHE_SLOTS`] of them, at
-//! most [`CACHE_BYTES`] in all) instead of being unmapped at once. Why: a
+//! **While a [`KeepFreed`] guard lives, freed large blocks are kept for
+//! reuse** ([`CACHE_SLOTS`] of them, at most [`CACHE_BYTES`] in all)
+//! instead of being unmapped at once; the last guard's drop unmaps what is
+//! left. A build holds one (`build::build_file_with`). Why: a
 //! build frees big buffers between stages (the soup after welding, the
 //! topology's listing after the edges are made) and allocates new ones
 //! right after, and every fresh page is a fault and a page zeroed by the
@@ -27,8 +29,10 @@
 //! A kept block is handed out again (cut to size, or grown in place with
 //! `mremap`, which keeps its pages), zeroed by a `memset` only when the
 //! caller asks for zeroed memory, as `vec![0; n]` does. glibc's malloc keeps
-//! freed memory in the same way for blocks below its mmap threshold, so
-//! this only gives large blocks what small ones already had.
+//! freed memory in the same way for blocks below its mmap threshold. Why
+//! only under a guard: kept blocks still count in the process's memory, and
+//! while `verify` (whose many small allocations go to malloc) ran with them
+//! kept its peak grew from 366 to 402 MiB on the dragon, for no time gained.
 //!
 //! The `svpack` binary and the benchmarks install it with
 //! `#[global_allocator]`; library users choose their own allocator.
@@ -49,6 +53,49 @@ pub const CACHE_SLOTS: usize = 8;
 /// block is unmapped at once.
 pub const CACHE_BYTES: usize = 256 << 20;
 
+/// Number of live [`KeepFreed`] guards.
+static KEEPERS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// While one of these lives, [`HugePageAlloc`] keeps freed large blocks for
+/// reuse (see the module documentation); the last one to drop gives the
+/// kept blocks back to the system. Guards nest and may live on several
+/// threads at once (a batch builds several inputs in parallel).
+#[derive(Debug)]
+#[must_use = "blocks are kept only while the guard lives"]
+pub struct KeepFreed(());
+
+impl KeepFreed {
+    /// Starts keeping freed large blocks, until the guard (and every other
+    /// live guard) is dropped.
+    pub fn new() -> Self {
+        KEEPERS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        KeepFreed(())
+    }
+}
+
+impl Default for KeepFreed {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for KeepFreed {
+    fn drop(&mut self) {
+        if KEEPERS.fetch_sub(1, std::sync::atomic::Ordering::SeqCst) == 1 {
+            release();
+        }
+    }
+}
+
+/// Unmaps every kept block.
+fn release() {
+    #[cfg(target_os = "linux")]
+    while let Some((p, s)) = take(0) {
+        // SAFETY: a kept block is a mapping of `s` bytes nobody else holds.
+        unsafe { sys::unmap(p, s) };
+    }
+}
+
 /// Freed large blocks, `(address, span)`; span 0 marks a free slot. A lock
 /// around an array: `std::sync::Mutex` never allocates (it is a futex), so
 /// it is usable inside an allocator, and large blocks are few and big, so
@@ -57,10 +104,14 @@ pub const CACHE_BYTES: usize = 256 << 20;
 static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
     std::sync::Mutex::new([(0, 0); CACHE_SLOTS]);
 
-/// Keeps the freed block `p` (a mapping of `span` bytes) for reuse if a slot
-/// is free and the cache stays within [`CACHE_BYTES`]; false otherwise.
+/// Keeps the freed block `p` (a mapping of `span` bytes) for reuse if a
+/// [`KeepFreed`] guard lives, a slot is free and the cache stays within
+/// [`CACHE_BYTES`]; false otherwise.
 #[cfg(target_os = "linux")]
 fn keep(p: *mut u8, span: usize) -> bool {
+    if KEEPERS.load(std::sync::atomic::Ordering::Relaxed) == 0 {
+        return false;
+    }
     let Ok(mut cache) = CACHE.lock() else {
         return false;
     };
@@ -315,21 +366,22 @@ mod tests {
         (held.clone().count(), held.map(|c| c.1).sum())
     }
 
-    /// A freed block comes back for the next large request, cut to size,
-    /// grown, or whole, and `alloc_zeroed` never shows its old bytes; the
-    /// cache keeps no more than its limits. Caught: a reused block not
-    /// zeroed, and a grown block cut to its old length (the write at its
-    /// end faults).
+    /// Under a guard, a freed block comes back for the next large request,
+    /// cut to size, grown, or whole, and `alloc_zeroed` never shows its old
+    /// bytes; the cache keeps no more than its limits, nothing without a
+    /// guard, and empties when the last guard drops. Caught: a reused block
+    /// not zeroed, a grown block cut to its old length (the write at its end
+    /// faults), and blocks kept with no guard.
     #[cfg(target_os = "linux")]
     #[test]
     fn freed_blocks_are_reused_and_zeroed_on_request() {
         let _serial = SERIAL.lock().unwrap();
         let a = HugePageAlloc;
         let lay = |size| Layout::from_size_align(size, 8).unwrap();
-        // Start from an empty cache.
-        while let Some((p, s)) = take(0) {
-            unsafe { sys::unmap(p, s) };
-        }
+        // Without a guard nothing is kept.
+        unsafe { a.dealloc(a.alloc(lay(HUGE_MIN)), lay(HUGE_MIN)) };
+        assert_eq!(cached(), (0, 0));
+        let outer = KeepFreed::new();
         for (first, second) in [
             (3 * HUGE_MIN, 3 * HUGE_MIN),     // same span
             (5 * HUGE_MIN, 2 * HUGE_MIN + 1), // cut
@@ -371,10 +423,13 @@ mod tests {
                 a.dealloc(p, lay(HUGE_MIN));
             }
             assert_eq!(cached(), (CACHE_SLOTS, CACHE_SLOTS * HUGE_MIN));
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
         }
+        // Guards nest: the kept blocks go when the last one drops.
+        let inner = KeepFreed::new();
+        drop(outer);
+        assert_eq!(cached(), (CACHE_SLOTS, CACHE_SLOTS * HUGE_MIN));
+        drop(inner);
+        assert_eq!(cached(), (0, 0));
     }
 
     #[test]

@@ -319,6 +319,10 @@ pub fn build_file_with(
             cfg.max_mult
         )));
     }
+    // Freed stage buffers (the soup after welding, the listings after the
+    // topology) are handed to the next stage's allocations instead of going
+    // back to the system (`crate::alloc`); given back when the build ends.
+    let _keep = crate::alloc::KeepFreed::new();
     let start = Instant::now();
     let mut timings = Timings::default();
     stage("load");
