@@ -8,6 +8,7 @@
 //! cargo run --release --example stage_probe -- read FILE     # read against map, first touch
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
+//! cargo run --release --example stage_probe -- replace DIR   # putting a 120 MiB output in place
 //! ```
 //!
 //! `build` and `verify` run on one thread (`RAYON_NUM_THREADS` overrides).
@@ -52,8 +53,9 @@ fn main() {
         "read" => read(path),
         "build" => build(path),
         "verify" => verify(path),
+        "replace" => replace(path),
         _ => {
-            eprintln!("unknown step {what:?}: read, build or verify");
+            eprintln!("unknown step {what:?}: read, build, verify or replace");
             std::process::exit(1);
         }
     }
@@ -130,6 +132,68 @@ fn build(path: &Path) {
          caps fill {caps_ms:.2} ms, sides fill {sides_ms:.2} ms",
         w.triangle_count()
     );
+}
+
+/// What putting a finished 120 MiB output in place costs in directory
+/// `dir` (the tenth round's `format::persist`), 3 times each, the previous
+/// output on disk (synced) and the new file just written, as a rebuild
+/// finds them: a rename onto a fresh name; a rename over the previous output
+/// (on ext4 the call starts writeback of the new file); the swap
+/// (`renameat2` with `RENAME_EXCHANGE`) and the removal of the previous
+/// output it leaves under the temp name. Plain `std` and `libc`, so it
+/// builds at older commits too.
+fn replace(dir: &Path) {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    let bytes: Vec<u8> = (0..120u32 << 20)
+        .map(|i| i.wrapping_mul(2654435761) as u8)
+        .collect();
+    let (tmp, out) = (dir.join("probe.tmp"), dir.join("probe.out"));
+    let c = |p: &Path| CString::new(p.as_os_str().as_bytes()).unwrap();
+    let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+    let sync = || std::process::Command::new("sync").status().unwrap();
+    // The previous output on disk (synced), the new one just written.
+    let prepare = |previous: bool| {
+        let _ = std::fs::remove_file(&out);
+        if previous {
+            std::fs::write(&out, &bytes).unwrap();
+        }
+        sync();
+        std::fs::write(&tmp, &bytes).unwrap();
+    };
+    for _ in 0..3 {
+        prepare(false);
+        let t = Instant::now();
+        std::fs::rename(&tmp, &out).unwrap();
+        let fresh = ms(t);
+        prepare(true);
+        let t = Instant::now();
+        std::fs::rename(&tmp, &out).unwrap();
+        let over = ms(t);
+        prepare(true);
+        let t = Instant::now();
+        // SAFETY: two NUL-terminated paths that outlive the call.
+        let rc = unsafe {
+            libc::syscall(
+                libc::SYS_renameat2,
+                libc::AT_FDCWD,
+                c(&tmp).as_ptr(),
+                libc::AT_FDCWD,
+                c(&out).as_ptr(),
+                libc::RENAME_EXCHANGE,
+            )
+        };
+        assert_eq!(rc, 0, "{}", std::io::Error::last_os_error());
+        let swap = ms(t);
+        let t = Instant::now();
+        std::fs::remove_file(&tmp).unwrap();
+        let remove = ms(t);
+        println!(
+            "rename to a fresh name {fresh:.1} ms; rename over the previous output {over:.1} ms; \
+             swap {swap:.2} ms + removing the previous output {remove:.1} ms"
+        );
+    }
+    let _ = std::fs::remove_file(&out);
 }
 
 /// `verify`'s orientation check for 12 point lights around the mesh, after
