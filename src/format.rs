@@ -553,9 +553,19 @@ fn temp_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
 /// filesystem without the exchange get the plain rename, with its usual
 /// errors and semantics (a symlink is replaced, not followed).
 fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    #[cfg(target_os = "linux")]
-    if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_file())
-        && exchange(tmp.path(), path).is_ok()
+    persist_with(tmp, path, exchange)
+}
+
+/// [`persist`] with `swap` for the exchange (tests make it fail, as a
+/// filesystem without `RENAME_EXCHANGE` does).
+fn persist_with(
+    tmp: tempfile::NamedTempFile,
+    path: &Path,
+    swap: impl Fn(&Path, &Path) -> std::io::Result<()>,
+) -> Result<()> {
+    if cfg!(target_os = "linux")
+        && std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_file())
+        && swap(tmp.path(), path).is_ok()
     {
         // `tmp`'s path now names the old file: remove it. (Were `path`
         // replaced by a directory between the check and the exchange, this
@@ -593,6 +603,12 @@ fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
     } else {
         Err(std::io::Error::last_os_error())
     }
+}
+
+/// No exchange off Linux: [`persist`] renames.
+#[cfg(not(target_os = "linux"))]
+fn exchange(_: &Path, _: &Path) -> std::io::Result<()> {
+    Err(std::io::ErrorKind::Unsupported.into())
 }
 
 /// Writes the file to `path` atomically (temp file in the same directory,
@@ -1158,7 +1174,8 @@ mod tests {
     /// `persist` onto a directory fails like a rename (naming the path) and
     /// leaves the directory and its contents alone, with no temp file left;
     /// onto nothing and onto a regular file it puts the temp file's bytes
-    /// at the path, and the replaced file lives on under its other links.
+    /// at the path, and the replaced file lives on under its other links,
+    /// also where the exchange fails (it falls back to the rename).
     /// Caught: an exchange tried without checking what is at the path
     /// (the directory ends up under the temp name).
     #[cfg(unix)]
@@ -1186,10 +1203,18 @@ mod tests {
         assert_eq!(std::fs::read(&out).unwrap(), b"second");
         assert_eq!(std::fs::read(dir.path().join("link")).unwrap(), b"first");
 
+        // A filesystem without the exchange: the rename, same result.
+        let mut tmp = temp_beside(&out).unwrap();
+        tmp.write_all(b"third").unwrap();
+        let refuse = |_: &Path, _: &Path| Err(std::io::ErrorKind::InvalidInput.into());
+        persist_with(tmp, &out, refuse).unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"third");
+        assert_eq!(std::fs::read(dir.path().join("link")).unwrap(), b"first");
+
         let d = dir.path().join("d.svpk");
         std::fs::create_dir(&d).unwrap();
         std::fs::write(d.join("keep"), b"x").unwrap();
-        let err = put(&d, b"third").unwrap_err().to_string();
+        let err = put(&d, b"fourth").unwrap_err().to_string();
         assert!(err.contains("d.svpk"), "{err}");
         assert!(d.join("keep").is_file());
         assert_eq!(names(), ["d.svpk", "link", "o.svpk"]);
