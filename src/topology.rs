@@ -87,11 +87,14 @@ impl Edges {
 ///    order, each giving its edge records at that vertex (the listing, and
 ///    under `lo` also the swapped pair) without reading the triangle, its
 ///    few edge records sorted by larger endpoint, stably
-///    (`rank_sort_block`), its opposite vertices and triangles written
-///    straight to their final place, and its edges one after the other from
-///    the group's first record's offset (edges never outnumber records).
-/// 4. **Compact**: each group's edges are moved down after the previous
-///    groups' (one move per group).
+///    (`rank_sort_block`), its opposite vertices written over the group's
+///    own listings, already read (8 bytes a listing, at most two records of
+///    4), its triangles straight to their final place, and its edges one
+///    after the other from the group's first record's offset (edges never
+///    outnumber records).
+/// 4. **Compact**: each group's opposite vertices and edges are moved down
+///    after the previous groups' (one move per group and array), and the
+///    listings' memory becomes `opp`.
 ///
 /// Why not sort the 3·T half-edges themselves (the previous method, a
 /// two-level counting sort of 16-byte records, kept as a bench baseline):
