@@ -386,13 +386,13 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
                     // would mispredict on about every other record). Its range
                     // ends here, a global position in `opp`. `ne` never passes
                     // the records seen before this one, so the slot exists.
+                    // Pass 1 counted this group's records, so this holds; it
+                    // is checked because the writes below are unchecked.
+                    assert!(no + sorted.len() <= m, "topology: records miscounted");
                     for (i, rec) in sorted.iter().enumerate() {
-                        // Pass 1 counted this group's records (asserted
-                        // after the loop), so this stays in its listings.
-                        debug_assert!(no < m);
-                        // SAFETY: `no < m`, and the group's first `m` u32
-                        // from `oo` lie inside its listings (see where `e`
-                        // is made), which only this job touches.
+                        // SAFETY: `no < m` (above), and the group's first `m`
+                        // u32 from `oo` lie inside its listings (see where
+                        // `e` is made), which only this job touches.
                         unsafe { oo.add(no).write(rec[2]) };
                         if TRI {
                             ot[no] = MaybeUninit::new(rec[3]);
