@@ -664,6 +664,25 @@ mod tests {
         e
     }
 
+    /// Panics unless `got == want`, naming the first array and index that
+    /// differ (the arrays have hundreds of thousands of entries; printing
+    /// them whole buried the answer).
+    fn same_edges(got: &Edges, want: &Edges, what: &str) {
+        let arrays = [
+            ("a", &got.a, &want.a),
+            ("b", &got.b, &want.b),
+            ("opp_start", &got.opp_start, &want.opp_start),
+            ("opp", &got.opp, &want.opp),
+            ("opp_tri", &got.opp_tri, &want.opp_tri),
+        ];
+        for (name, g, w) in arrays {
+            if let Some(i) = (0..g.len().min(w.len())).find(|&i| g[i] != w[i]) {
+                panic!("{what}: {name}[{i}] is {}, expected {}", g[i], w[i]);
+            }
+            assert_eq!(g.len(), w.len(), "{what}: length of {name}");
+        }
+    }
+
     #[test]
     fn matches_the_obvious_implementation_across_ranges_and_chunks() {
         // Several vertex ranges; triangles over a random strip of vertices
@@ -694,15 +713,15 @@ mod tests {
             ..expected.clone()
         };
         for chunks in 1..=5 {
-            assert_eq!(
-                build_edges_in::<true>(&tris, vertices, chunks),
-                expected,
-                "{chunks} chunks"
+            same_edges(
+                &build_edges_in::<true>(&tris, vertices, chunks),
+                &expected,
+                &format!("{chunks} chunks"),
             );
-            assert_eq!(
-                build_edges_in::<false>(&tris, vertices, chunks),
-                without_tri,
-                "{chunks} chunks, opposites only"
+            same_edges(
+                &build_edges_in::<false>(&tris, vertices, chunks),
+                &without_tri,
+                &format!("{chunks} chunks, opposites only"),
             );
         }
         // The public entry point cuts chunks and groups by thread count.
@@ -712,11 +731,19 @@ mod tests {
                 .build()
                 .unwrap();
             let got = pool.install(|| build_edges(&tris, vertices));
-            assert_eq!(got, expected, "{threads} threads");
+            same_edges(&got, &expected, &format!("{threads} threads"));
             let got = pool.install(|| build_edges_opposites_only(&tris, vertices));
-            assert_eq!(got, without_tri, "{threads} threads, opposites only");
+            same_edges(
+                &got,
+                &without_tri,
+                &format!("{threads} threads, opposites only"),
+            );
         }
-        assert_eq!(build_edges(&tris[..3000], vertices), naive(&tris[..3000]));
+        same_edges(
+            &build_edges(&tris[..3000], vertices),
+            &naive(&tris[..3000]),
+            "3000 triangles",
+        );
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(
             build_edges_in::<true>(&tris[..3], vertices, 4),
