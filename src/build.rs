@@ -517,6 +517,10 @@ pub fn build_batch_with(
     done: &(dyn Fn(usize) + Sync),
 ) -> Vec<Result<BuildOutput>> {
     use rayon::prelude::*;
+    // One guard for the whole batch: the blocks one input's build frees at
+    // its end (its soup, welded mesh and edges) serve the next input's,
+    // instead of each build starting from fresh pages (`crate::alloc`).
+    let _keep = crate::alloc::KeepFreed::new();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build();
     let run = || {
         inputs
