@@ -8,14 +8,14 @@
 //! (`asm_exc_page_fault` 25 %, of which zeroing the pages, `clear_page_erms`,
 //! was only 4 %). Many distributions set transparent huge pages to `madvise`,
 //! so they are only used where a program asks; this allocator asks for every
-//! allocation of at least [`LARGE_MIN`] bytes, which cuts the fault count of
+//! allocation of at least [`HUGE_MIN`] bytes, which cuts the fault count of
 //! those buffers by 512.
 //!
 //! Small blocks go to [`std::alloc::System`] unchanged. Blocks of at least
-//! [`LARGE_MIN`] bytes get an anonymous mapping of their own, a whole number
-//! of huge pages ([`HUGE_MIN`]) long, with an `madvise(MADV_HUGEPAGE)` hint.
-//! The hint never changes what the program computes, and a kernel without
-//! THP ignores it. On other systems the allocator is exactly `System`.
+//! [`HUGE_MIN`] bytes get an anonymous mapping of their own, a whole number
+//! of huge pages long, with an `madvise(MADV_HUGEPAGE)` hint. The hint never changes what the program
+//! computes, and a kernel without THP ignores it. On other systems the
+//! allocator is exactly `System`.
 //!
 //! **While a [`KeepFreed`] guard lives, freed large blocks are kept for
 //! reuse** ([`CACHE_SLOTS`] of them, at most [`CACHE_BYTES`] in all)
@@ -48,23 +48,9 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 
-/// The huge-page size (2 MiB on x86-64), the unit large blocks' mappings
-/// are measured in: the smallest range the hint can help.
+/// Allocations of at least this many bytes get their own huge-page mapping:
+/// one huge page (2 MiB on x86-64) is the smallest range the hint can help.
 pub const HUGE_MIN: usize = 2 << 20;
-
-/// Allocations of at least this many bytes are large blocks (a mapping of
-/// their own, a whole number of huge pages long).
-///
-/// Why half a huge page and not one: the per-vertex arrays of the weld and
-/// the topology (4 bytes a vertex, 1.75 MB on the dragon) went to malloc,
-/// which faulted them in 4 KiB at a time, fresh in every build. As large
-/// blocks they take one huge-page fault each, or reuse a kept block: on the
-/// dragon the 4 KiB pages a build faults in went from 6.2 to 2.0 MiB (huge
-/// pages 48 → 50 MiB), and the build from 74.2 / 75.7 to 71.3 / 73.4 ms
-/// with two threads, 110.3 / 113.9 to 109.8 / 111.9 ms with one (fastest /
-/// median of 11, `benches/compare_binaries.py`). Below 1 MiB the huge page
-/// zeroed would be more than twice the bytes used.
-pub const LARGE_MIN: usize = 1 << 20;
 
 /// Large blocks' alignment limit: `mmap` returns page-aligned memory.
 const PAGE: usize = 4096;
@@ -222,7 +208,7 @@ fn large_block(span: usize, size: usize, zeroed: bool) -> *mut u8 {
 }
 
 /// [`System`] for small blocks; on Linux, its own anonymous mapping with the
-/// `MADV_HUGEPAGE` hint for blocks of at least [`LARGE_MIN`] bytes (see the
+/// `MADV_HUGEPAGE` hint for blocks of at least [`HUGE_MIN`] bytes (see the
 /// module documentation).
 ///
 /// Large blocks bypass malloc because glibc's dynamic mmap threshold serves
@@ -251,7 +237,7 @@ fn span(size: usize) -> usize {
 
 #[inline]
 fn is_large(size: usize, align: usize) -> bool {
-    cfg!(target_os = "linux") && size >= LARGE_MIN && align <= PAGE
+    cfg!(target_os = "linux") && size >= HUGE_MIN && align <= PAGE
 }
 
 #[cfg(target_os = "linux")]
@@ -385,7 +371,7 @@ unsafe impl GlobalAlloc for HugePageAlloc {
             // SAFETY: the caller's contract.
             (false, false) => unsafe { System.realloc(ptr, layout, new_size) },
             _ => {
-                // Crossing LARGE_MIN: move between the two kinds of block.
+                // Crossing HUGE_MIN: move between the two kinds of block.
                 // SAFETY: the caller guarantees a valid size for `align`.
                 let new_layout = unsafe { Layout::from_size_align_unchecked(new_size, align) };
                 // SAFETY: non-zero size (at least one side is large).
@@ -529,7 +515,7 @@ mod tests {
     fn large_and_small_blocks_round_trip() {
         let _serial = SERIAL.lock().unwrap();
         let a = HugePageAlloc;
-        for size in [16, LARGE_MIN - 1, LARGE_MIN, HUGE_MIN, 3 * HUGE_MIN + 123] {
+        for size in [16, HUGE_MIN - 1, HUGE_MIN, 3 * HUGE_MIN + 123] {
             let layout = Layout::from_size_align(size, 64).unwrap();
             unsafe {
                 let p = a.alloc_zeroed(layout);
