@@ -109,17 +109,25 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
     if !soup.indices.len().is_multiple_of(3) {
         return Err(Error::input(path, "index count is not a multiple of 3"));
     }
+    use rayon::prelude::*;
     let n = soup.positions.len();
-    // A fold, not `iter().max()`: that tracks a reference and does not
-    // vectorise.
-    let largest = soup.indices.iter().fold(0, |m, &i| m.max(i));
+    // The fast path: every index in range and every position finite, in
+    // blocks on all threads (one pass over the dragon's 15 MB: 0.77 ms
+    // serial, 0.51 ms with two threads when hot; `perf` put about 2 ms of
+    // a one-thread build in it, cold). A fold, not `iter().max()`: that
+    // tracks a reference and does not vectorise.
+    let largest = soup
+        .indices
+        .par_chunks(CHECK_BLOCK)
+        .map(|c| c.iter().fold(0, |m, &i| m.max(i)))
+        .reduce(|| 0, u32::max);
     let in_range = soup.indices.is_empty() || (largest as usize) < n;
     let finite = |c: &[[f32; 3]]| {
         c.iter().fold(true, |ok, p| {
             ok & p[0].is_finite() & p[1].is_finite() & p[2].is_finite()
         })
     };
-    if in_range && soup.positions.chunks(4096).all(finite) {
+    if in_range && soup.positions.par_chunks(CHECK_BLOCK).all(finite) {
         return Ok(());
     }
     for (t, c) in soup.indices.chunks_exact(3).enumerate() {
@@ -293,6 +301,10 @@ pub fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     }
     (lo, hi)
 }
+
+/// Elements per parallel block of [`check_soup`]'s checks (exact, so the
+/// result does not depend on how the blocks are combined).
+const CHECK_BLOCK: usize = 1 << 16;
 
 fn file_name(path: &Path) -> String {
     path.file_name()
