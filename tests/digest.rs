@@ -1,8 +1,9 @@
 //! The header records the byte count and SHA-256 of every byte a build read
 //! (the file, then a glTF's external buffers, in read order), whatever the
 //! number of threads: with two, the digest of a large input is computed on
-//! a thread of its own beside the decoding (`load::digest_while`); with one,
-//! or for small inputs, on the loading thread.
+//! threads of its own (a glTF's from the moment the file is read, beside
+//! the parse, then its external buffers beside the decoding; an OBJ's
+//! beside the parse); with one, or for small inputs, on the loading thread.
 
 mod common;
 
@@ -78,4 +79,71 @@ fn header_digest_covers_every_byte_read_with_any_threads() {
             }
         }
     }
+}
+
+/// A glTF large enough for its digest to start before its JSON is parsed
+/// (FlightHelmet's JSON padded to 300 KiB with whitespace) whose external
+/// buffer is hashed after the file: the same digest as the bytes in read
+/// order, with 1 and 2 threads. Caught: the external buffer left out once
+/// the head of the digest ran on its own thread (the test above, whose
+/// glTF is small, did not see it).
+#[test]
+fn early_digest_takes_the_external_buffers_after_the_file() {
+    let Some(shared) = common::shared_meshes() else {
+        return;
+    };
+    let helmet = shared.join("gltf/FlightHelmet");
+    let dir = tempfile::tempdir().unwrap();
+    let mut json = std::fs::read(helmet.join("FlightHelmet.gltf")).unwrap();
+    json.resize(json.len() + (300 << 10), b' ');
+    let gltf = dir.path().join("FlightHelmet.gltf");
+    std::fs::write(&gltf, &json).unwrap();
+    std::fs::copy(
+        helmet.join("FlightHelmet.bin"),
+        dir.path().join("FlightHelmet.bin"),
+    )
+    .unwrap();
+    let expected = digest_of(&[gltf.clone(), dir.path().join("FlightHelmet.bin")]);
+    for threads in [1, 2] {
+        let out = dir.path().join("out.svpk");
+        assert_eq!(
+            built_digest(&gltf, &out, threads, false),
+            expected,
+            "{threads} thread(s)"
+        );
+    }
+}
+
+/// A large GLB whose JSON is rejected (an unsupported version) while the
+/// digest of the file is being computed on another thread: the build
+/// fails with the loader's error naming the file, writes nothing, and
+/// returns (the hashing thread is told to stop and is joined).
+#[test]
+fn a_failed_load_ends_its_early_digest() {
+    let Some(shared) = common::shared_meshes() else {
+        return;
+    };
+    let mut glb = std::fs::read(shared.join("gltf/2CylinderEngine.glb")).unwrap();
+    let at = glb
+        .windows(5)
+        .position(|w| w == b"\"2.0\"")
+        .expect("a version string in the JSON");
+    glb[at + 1] = b'9';
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("engine.glb");
+    std::fs::write(&input, &glb).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let out = dir.path().join("out.svpk");
+    let err = pool
+        .install(|| build_file(&input, &out, &BuildConfig::default()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("engine.glb") && err.contains("version"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }

@@ -57,9 +57,16 @@ const MAX_LISTED_PROBLEMS: usize = 3;
 /// [`Error::Input`]; NaN/Inf positions are passed through for later stages.
 pub fn load_gltf(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
     let data: FileBytes = data.into();
+    // The digest starts on the file's bytes now, beside the parse (see
+    // `DigestHead`), and takes the external buffers once they are read.
+    super::with_digest_head(&data, |head| load_gltf_with(path, &data, head))
+}
+
+/// [`load_gltf`] of `data`, whose digest `head` has begun.
+fn load_gltf_with(path: &Path, data: &FileBytes, head: super::DigestHead<'_>) -> Result<Soup> {
     let mut warnings = Vec::new();
 
-    let container = split_container(path, &data, &mut warnings)?;
+    let container = split_container(path, data, &mut warnings)?;
     check_version(path, container.json)?;
     let root = parse_root(path, container.json)?;
     check_extensions(path, &root, &mut warnings)?;
@@ -86,13 +93,14 @@ pub fn load_gltf(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
     };
 
     // The input's SHA-256 covers the file, then the external buffers it
-    // read, in read order. Every byte is in memory now, so the whole digest
-    // is computed beside the decoding when there are threads to spare (see
-    // `digest_while`); the JSON parse before this point is small next to
-    // the binary data.
-    let mut parts: Vec<&[u8]> = vec![&*data];
-    parts.extend(external.iter().filter_map(|&b| ctx.buffers[b].as_deref()));
-    let ((input_bytes, input_sha256), built) = super::digest_while(&parts, || {
+    // read, in read order. Every byte is in memory now, so the digest is
+    // completed beside the decoding when there are threads to spare (see
+    // `DigestHead`).
+    let rest: Vec<&[u8]> = external
+        .iter()
+        .filter_map(|&b| ctx.buffers[b].as_deref())
+        .collect();
+    let ((input_bytes, input_sha256), built) = head.finish_while(&rest, || {
         let mut soup = Soup::default();
         reserve_soup(&ctx, &instances, &mut soup);
         build_soup(&ctx, &instances, &mut soup, &mut warnings).map(|()| soup)
