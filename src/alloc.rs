@@ -35,9 +35,10 @@
 //! blocks of their own rather than unmapped: their pages are often touched
 //! already. On a 5M-triangle scene this took the fresh pages a build
 //! faults in (kernel `mm_page_alloc` events, huge pages) from 286 to 266
-//! MiB with one thread and from 394 to 316 MiB with two, where the
-//! topology's count array was cut from the soup's 30 MiB positions and its
-//! edge arrays shrunk from their record-sized reservations. glibc's malloc keeps
+//! MiB with one thread and from 384–394 to 316–322 MiB with two
+//! (`benches/fresh_pages.py`, two runs each), where the topology's count
+//! array was cut from the soup's 30 MiB positions and its edge arrays
+//! shrunk from their record-sized reservations. glibc's malloc keeps
 //! freed memory in the same way for blocks below its mmap threshold. Why
 //! only under a guard: kept blocks still count in the process's memory, and
 //! while `verify` (whose many small allocations go to malloc) ran with them
