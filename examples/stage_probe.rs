@@ -7,6 +7,7 @@
 //! ```text
 //! cargo run --release --example stage_probe -- read FILE     # read against map, first touch
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
+//! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
 //! cargo run --release --example stage_probe -- replace DIR   # putting a 120 MiB output in place
 //! ```
@@ -15,7 +16,9 @@
 //! Only APIs older than the ninth round are used, so the same file builds
 //! at earlier commits (copy it into a worktree) for the before figures; so
 //! the weld timed is `weld::weld`, with the triangle sources the build
-//! itself no longer makes.
+//! itself no longer makes. The exception is `passes`
+//! (`topology::build_edges_opposites_only_timed`, eleventh round): delete
+//! `passes` to build the file at an earlier commit.
 
 use std::path::Path;
 use std::time::Instant;
@@ -39,7 +42,7 @@ fn fastest<T>(n: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [what, file] = &args[..] else {
-        eprintln!("usage: stage_probe read|build|verify FILE");
+        eprintln!("usage: stage_probe read|build|passes|verify FILE");
         std::process::exit(1);
     };
     let path = Path::new(file);
@@ -52,6 +55,7 @@ fn main() {
     match what.as_str() {
         "read" => read(path),
         "build" => build(path),
+        "passes" => passes(path),
         "verify" => verify(path),
         "replace" => replace(path),
         _ => {
@@ -84,6 +88,37 @@ fn read(path: &Path) {
     let (r, _) = fastest(5, by_read);
     let (m, _) = fastest(5, by_map);
     println!("then fastest of 5: read {r:.2} ms, mapped {m:.2} ms");
+}
+
+/// The topology's four passes on the welded model (one thread unless
+/// `RAYON_NUM_THREADS` says otherwise): the fastest time of each over 15
+/// runs (not necessarily from the same run).
+fn passes(path: &Path) {
+    let soup = svpack::load::load(path).unwrap();
+    let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
+    let mut best = [f64::MAX; 5];
+    for _ in 0..15 {
+        let t = Instant::now();
+        let (e, p) =
+            svpack::topology::build_edges_opposites_only_timed(&w.triangles, w.positions.len());
+        let all = t.elapsed();
+        std::hint::black_box(e);
+        for (b, d) in best
+            .iter_mut()
+            .zip([all, p.count, p.list, p.emit, p.compact])
+        {
+            *b = b.min(d.as_secs_f64() * 1e3);
+        }
+    }
+    println!(
+        "{} triangles: topology {:.2} ms: count {:.2}, list {:.2}, emit {:.2}, compact {:.2} ms",
+        w.triangle_count(),
+        best[0],
+        best[1],
+        best[2],
+        best[3],
+        best[4]
+    );
 }
 
 /// The build's steps after loading, each on the previous one's output.

@@ -112,7 +112,7 @@ impl Edges {
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles))
+    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles)).0
 }
 
 /// [`build_edges`] without `opp_tri` (left empty): what a build needs, since
@@ -121,7 +121,29 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
 /// triangle) pair (60 MB on a 5M-triangle scene), all of it fresh pages,
 /// and one write per record less.
 pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edges {
+    build_edges_in::<false>(triangles, vertex_count, chunks_for(triangles)).0
+}
+
+/// [`build_edges_opposites_only`], with the wall time of each of its four
+/// passes (for `examples/stage_probe.rs`, which profiles them).
+pub fn build_edges_opposites_only_timed(
+    triangles: &[u32],
+    vertex_count: usize,
+) -> (Edges, PassTimes) {
     build_edges_in::<false>(triangles, vertex_count, chunks_for(triangles))
+}
+
+/// Wall time of each pass of [`build_edges`] (see there for the passes).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PassTimes {
+    /// Pass 1, counting the listings (with the prefix sums after it).
+    pub count: std::time::Duration,
+    /// Pass 2, listing every triangle under two corners.
+    pub list: std::time::Duration,
+    /// Pass 3, the edges and opposite vertices, vertex by vertex.
+    pub emit: std::time::Duration,
+    /// Pass 4, moving the groups' output into place.
+    pub compact: std::time::Duration,
 }
 
 /// Chunks of the count and list passes: one per thread for large inputs.
@@ -135,9 +157,15 @@ fn chunks_for(triangles: &[u32]) -> usize {
 
 /// [`build_edges`] (with `opp_tri` when `TRI`) with the triangles cut into
 /// `chunks` chunks for the count and list passes (tests use it to vary the
-/// cut).
-fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunks: usize) -> Edges {
+/// cut), and the passes' times.
+fn build_edges_in<const TRI: bool>(
+    triangles: &[u32],
+    vertex_count: usize,
+    chunks: usize,
+) -> (Edges, PassTimes) {
     use rayon::prelude::*;
+    use std::time::Instant;
+    let started = Instant::now();
     let tcount = triangles.len() / 3;
     // Record offsets (3 per triangle) are u32.
     assert!(
@@ -191,6 +219,7 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
             rec_start[r] + counts.iter().map(|(_, rr)| rr[r] as usize).sum::<usize>();
     }
 
+    let counted = Instant::now();
     // Pass 2: list each triangle under its lo and mid corners. The lists
     // are allocated uninitialised: every slot is written exactly once below
     // (checked after the pass in debug builds), and zeroing them first was
@@ -260,6 +289,7 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
     debug_assert!(list_t.iter().all(|&t| t != UNWRITTEN));
     drop(counts);
 
+    let listed = Instant::now();
     // Pass 3: the edges with their opposite vertices and triangles, one
     // job per group of consecutive ranges, the groups holding about equal
     // numbers of records (one group per thread: within a group, edges are
@@ -420,6 +450,7 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
         .collect();
     drop(list_t);
 
+    let emitted = Instant::now();
     // Pass 4: each group's records moved down from its listings to follow
     // the previous groups' (records never outnumber twice the listings
     // before them, so a move only overwrites listings already moved or
@@ -490,7 +521,13 @@ fn build_edges_in<const TRI: bool>(triangles: &[u32], vertex_count: usize, chunk
     e.a.shrink_to_fit();
     e.b.shrink_to_fit();
     e.opp_start.shrink_to_fit();
-    e
+    let times = PassTimes {
+        count: counted - started,
+        list: listed - counted,
+        emit: emitted - listed,
+        compact: emitted.elapsed(),
+    };
+    (e, times)
 }
 
 /// A triangle's corners in increasing id order (no repeated ids): the
@@ -765,12 +802,12 @@ mod tests {
         };
         for chunks in 1..=5 {
             same_edges(
-                &build_edges_in::<true>(&tris, vertices, chunks),
+                &build_edges_in::<true>(&tris, vertices, chunks).0,
                 &expected,
                 &format!("{chunks} chunks"),
             );
             same_edges(
-                &build_edges_in::<false>(&tris, vertices, chunks),
+                &build_edges_in::<false>(&tris, vertices, chunks).0,
                 &without_tri,
                 &format!("{chunks} chunks, opposites only"),
             );
@@ -797,7 +834,7 @@ mod tests {
         );
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>(&tris[..3], vertices, 4),
+            build_edges_in::<true>(&tris[..3], vertices, 4).0,
             naive(&tris[..3])
         );
     }
