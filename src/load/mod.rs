@@ -93,8 +93,15 @@ impl InputDigest {
 
     /// Byte count and SHA-256 of `data` alone.
     pub fn of(data: &[u8]) -> (u64, [u8; 32]) {
+        Self::of_parts([data])
+    }
+
+    /// Byte count and SHA-256 of `parts`, fed in order.
+    pub fn of_parts<'a>(parts: impl IntoIterator<Item = &'a [u8]>) -> (u64, [u8; 32]) {
         let mut digest = Self::default();
-        digest.update(data);
+        for part in parts {
+            digest.update(part);
+        }
         digest.finish()
     }
 }
@@ -111,13 +118,7 @@ const CONCURRENT_DIGEST_MIN: usize = 256 << 10;
 /// thread when the rayon pool the caller runs in has more than one, so
 /// `--threads 1` still means one core. The digest is the same either way.
 pub fn digest_while<T>(parts: &[&[u8]], work: impl FnOnce() -> T) -> ((u64, [u8; 32]), T) {
-    let hash = || {
-        let mut digest = InputDigest::default();
-        for part in parts {
-            digest.update(part);
-        }
-        digest.finish()
-    };
+    let hash = || InputDigest::of_parts(parts.iter().copied());
     let total: usize = parts.iter().map(|p| p.len()).sum();
     if total < CONCURRENT_DIGEST_MIN || rayon::current_num_threads() < 2 {
         return (hash(), work());
@@ -202,14 +203,7 @@ impl DigestHead<'_> {
         work: impl FnOnce() -> T,
     ) -> ((u64, [u8; 32]), T) {
         let first = self.first;
-        let all = || {
-            let mut digest = InputDigest::default();
-            digest.update(first);
-            for part in rest {
-                digest.update(part);
-            }
-            digest.finish()
-        };
+        let all = || InputDigest::of_parts(std::iter::once(first).chain(rest.iter().copied()));
         let Some(head) = self.thread.take() else {
             let mut parts = vec![first];
             parts.extend_from_slice(rest);
