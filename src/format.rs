@@ -612,8 +612,8 @@ fn exchange(_: &Path, _: &Path) -> std::io::Result<()> {
 }
 
 /// Writes the file to `path` atomically (temp file in the same directory,
-/// then renamed or swapped in, see `persist`), optionally zstd-wrapped. Returns the final header and the
-/// number of bytes on disk.
+/// then renamed or swapped in, see `persist`), optionally zstd-wrapped.
+/// Returns the final header and the number of bytes on disk.
 pub fn write_file(
     path: &Path,
     header: Header,
