@@ -707,6 +707,43 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
     }
 }
 
+/// Reserves the disk blocks of a new `size`-byte `file` before it is
+/// written, on ext4 and XFS only (`fallocate`); anywhere else, or if the
+/// call fails, the writes allocate as they go, as without it.
+///
+/// Why: with no blocks behind it, every 4 KiB block a buffered write covers
+/// is reserved one by one (ext4's delayed allocation); with the blocks
+/// reserved in one call, the writes only look them up. Copying 128 MiB into
+/// the page cache here: 22.7–23.1 → 20.3–21.5 ms with one thread (the call
+/// included), 24.8–25.9 → 21.2–22.3 ms with two (a C probe, 1 MiB writes,
+/// 5 and 2 alternated runs). Only these two filesystems: on tmpfs, for one,
+/// `fallocate` zeroes pages that the writes then overwrite. The reserved
+/// blocks are "unwritten" until written back, which the kernel does later,
+/// outside the build.
+fn preallocate(file: &std::fs::File, size: u64) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::io::AsRawFd;
+        const EXT4: i64 = 0xEF53;
+        const XFS: i64 = 0x5846_5342;
+        let fd = file.as_raw_fd();
+        // SAFETY: `statfs` is plain data that `fstatfs` fills; `fd` is an
+        // open descriptor for the duration of both calls.
+        unsafe {
+            let mut st: libc::statfs = std::mem::zeroed();
+            if libc::fstatfs(fd, &mut st) != 0 || !matches!(st.f_type as i64, EXT4 | XFS) {
+                return;
+            }
+            // Mode 0 (allocate, may extend): the size is already `size`.
+            // A failure (no space for the reservation, an old kernel) is
+            // left to the writes, which report it if it is real.
+            let _ = libc::fallocate(fd, 0, 0, size as libc::off_t);
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = (file, size);
+}
+
 /// Writes a one-mesh uncompressed file to `path` atomically, filling the
 /// payload unit by unit straight into the file instead of from buffers in
 /// memory: the same bytes as [`write_file`] of the whole buffers.
@@ -754,6 +791,7 @@ pub fn write_file_streamed(
     let file = tmp.as_file();
     let size = container_len(&header);
     file.set_len(size).map_err(|e| Error::io(path, e))?;
+    preallocate(file, size);
     let crcs: Vec<Vec<crc32fast::Hasher>> = (0..units)
         .into_par_iter()
         .map_init(
@@ -1170,6 +1208,43 @@ pub fn zstd_size(file: &SvpkFile) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `preallocate` keeps a file's size and its zeros, and on ext4 or XFS
+    /// (where svpack calls `fallocate`) gives it its blocks. Caught: a
+    /// length past the size (the file grows), a wrong magic number (no
+    /// blocks on this machine's ext4).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn preallocation_reserves_blocks_without_changing_the_file() {
+        use std::os::unix::fs::MetadataExt;
+        use std::os::unix::io::AsRawFd;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.bin");
+        let file = std::fs::File::create(&path).unwrap();
+        let size = 3 << 20;
+        file.set_len(size).unwrap();
+        assert_eq!(
+            file.metadata().unwrap().blocks(),
+            0,
+            "a sparse file to start"
+        );
+        preallocate(&file, size);
+        let meta = file.metadata().unwrap();
+        assert_eq!(meta.len(), size);
+        // SAFETY: plain data filled by `fstatfs` on an open descriptor.
+        let fs = unsafe {
+            let mut st: libc::statfs = std::mem::zeroed();
+            assert_eq!(libc::fstatfs(file.as_raw_fd(), &mut st), 0);
+            st.f_type as i64
+        };
+        if matches!(fs, 0xEF53 | 0x5846_5342) {
+            assert!(meta.blocks() * 512 >= size, "{} blocks", meta.blocks());
+        }
+        drop(file);
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(bytes.len() as u64, size);
+        assert!(bytes.iter().all(|&b| b == 0));
+    }
 
     /// `persist` onto a directory fails like a rename (naming the path) and
     /// leaves the directory and its contents alone, with no temp file left;
