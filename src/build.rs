@@ -286,20 +286,51 @@ fn mesh_stats(
     }
 }
 
-/// Axis-aligned bounds of `positions` (zeros when empty).
+/// Axis-aligned bounds of `positions` (zeros when empty). NaN coordinates
+/// are passed over (all NaN: infinite bounds); between a `-0.0` and a
+/// `+0.0` the comparisons keep the one they met first, in a fixed order,
+/// so the result depends on the input only. (A build's welded positions
+/// have no `-0.0`.)
+///
+/// Why 48 lanes: the positions are read as one flat array, 16 at a time,
+/// each float into its own lane (lane `i` holds component `i % 3`), so the
+/// compare-and-select compiles to vector min and max instructions; the
+/// lanes are combined at the end. A loop of `f32::min` over the positions
+/// one by one was 2.3–3.0 ms of a one-thread build of the dragon (435k
+/// positions), serial with any number of threads.
 pub fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    const LANES: usize = 48;
     if positions.is_empty() {
         return ([0.0; 3], [0.0; 3]);
     }
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in positions {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
+    // `x < lo` is false for NaN, which therefore never replaces a bound.
+    let take = |lo: &mut f32, hi: &mut f32, x: f32| {
+        *lo = if x < *lo { x } else { *lo };
+        *hi = if x > *hi { x } else { *hi };
+    };
+    let flat: &[f32] = bytemuck::cast_slice(positions);
+    let mut lo = [f32::INFINITY; LANES];
+    let mut hi = [f32::NEG_INFINITY; LANES];
+    let mut steps = flat.chunks_exact(LANES);
+    for step in &mut steps {
+        for i in 0..LANES {
+            take(&mut lo[i], &mut hi[i], step[i]);
         }
     }
-    (lo, hi)
+    // The last positions (fewer than 16) start again at lane 0, which keeps
+    // lane i on component i % 3 (48 is a multiple of 3).
+    for (i, &x) in steps.remainder().iter().enumerate() {
+        take(&mut lo[i], &mut hi[i], x);
+    }
+    let (mut out_lo, mut out_hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for i in 0..LANES {
+        // Lanes no position reached still hold ±infinity, which the other
+        // side's comparison never takes.
+        let (l, h) = (&mut out_lo[i % 3], &mut out_hi[i % 3]);
+        *l = if lo[i] < *l { lo[i] } else { *l };
+        *h = if hi[i] > *h { hi[i] } else { *h };
+    }
+    (out_lo, out_hi)
 }
 
 /// Elements per parallel block of [`check_soup`]'s checks (exact, so the
@@ -556,6 +587,51 @@ pub fn build_batch_with(
 mod tests {
     use super::*;
     use crate::load::Part;
+
+    /// `bounds` against the obvious per-component fold, for every count
+    /// of positions up to past three 16-position steps (every remainder)
+    /// and a large one, with NaN and infinite coordinates mixed in.
+    /// Caught: the remainder left out; an unfilled lane's +infinity taken
+    /// as a maximum (fewer than 16 positions); lanes mapped to the wrong
+    /// component.
+    #[test]
+    fn bounds_match_a_plain_fold() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for n in (0..60).chain([1000, 4099]) {
+            let pos: Vec<[f32; 3]> = (0..n)
+                .map(|_| {
+                    std::array::from_fn(|k| match next() % 50 {
+                        0 => f32::NAN,
+                        1 => f32::INFINITY,
+                        2 => f32::NEG_INFINITY,
+                        r => (r as f32 - 25.0) * (k as f32 + 1.5) + (next() % 7) as f32 * 0.125,
+                    })
+                })
+                .collect();
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for p in &pos {
+                for k in 0..3 {
+                    if p[k] < lo[k] {
+                        lo[k] = p[k];
+                    }
+                    if p[k] > hi[k] {
+                        hi[k] = p[k];
+                    }
+                }
+            }
+            if n == 0 {
+                (lo, hi) = ([0.0; 3], [0.0; 3]);
+            }
+            assert_eq!(bounds(&pos), (lo, hi), "{n} positions");
+        }
+    }
 
     /// Two parts of two triangles each over 6 vertices, vertex 5 unused.
     fn soup(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> Soup {
