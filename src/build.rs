@@ -106,6 +106,13 @@ pub struct BuildOutput {
 /// non-finite position no triangle uses is then no error. The walk alone
 /// took 6 ms of a 1-thread build of the 871k-triangle dragon (`perf`).
 pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
+    check_soup_in(path, soup, true)
+}
+
+/// [`check_soup`], its fast path on this thread alone unless `parallel`
+/// (for a check that runs beside another thread's work, see
+/// `load::gltf::load_gltf_checked`).
+fn check_soup_in(path: &Path, soup: &Soup, parallel: bool) -> Result<()> {
     if !soup.indices.len().is_multiple_of(3) {
         return Err(Error::input(path, "index count is not a multiple of 3"));
     }
@@ -116,18 +123,29 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
     // serial, 0.51 ms with two threads when hot; `perf` put about 2 ms of
     // a one-thread build in it, cold). A fold, not `iter().max()`: that
     // tracks a reference and does not vectorise.
-    let largest = soup
-        .indices
-        .par_chunks(CHECK_BLOCK)
-        .map(|c| c.iter().fold(0, |m, &i| m.max(i)))
-        .reduce(|| 0, u32::max);
+    let largest_of = |c: &[u32]| c.iter().fold(0, |m, &i| m.max(i));
+    let largest = if parallel {
+        soup.indices
+            .par_chunks(CHECK_BLOCK)
+            .map(largest_of)
+            .reduce(|| 0, u32::max)
+    } else {
+        largest_of(&soup.indices)
+    };
     let in_range = soup.indices.is_empty() || (largest as usize) < n;
     let finite = |c: &[[f32; 3]]| {
         c.iter().fold(true, |ok, p| {
             ok & p[0].is_finite() & p[1].is_finite() & p[2].is_finite()
         })
     };
-    if in_range && soup.positions.par_chunks(CHECK_BLOCK).all(finite) {
+    let all_finite = || {
+        if parallel {
+            soup.positions.par_chunks(CHECK_BLOCK).all(finite)
+        } else {
+            finite(&soup.positions)
+        }
+    };
+    if in_range && all_finite() {
         return Ok(());
     }
     for (t, c) in soup.indices.chunks_exact(3).enumerate() {
@@ -371,11 +389,19 @@ pub fn build_file_with(
     stage("load");
     let data = load::read_file(input)?;
     let fmt = load::detect_format(input, &data)?;
+    // A glTF's soup is checked by its loader, while the input's digest
+    // finishes; an OBJ's digest ends long before the parse, so its check
+    // comes after, on all threads.
     let mut soup = match fmt {
-        load::Format::Gltf => load::gltf::load_gltf(input, data)?,
-        load::Format::Obj => load::obj::load_obj(input, data)?,
+        load::Format::Gltf => {
+            load::gltf::load_gltf_checked(input, data, |s| check_soup_in(input, s, false))?
+        }
+        load::Format::Obj => {
+            let soup = load::obj::load_obj(input, data)?;
+            check_soup(input, &soup)?;
+            soup
+        }
     };
-    check_soup(input, &soup)?;
     timings.load = ms(start);
     let quantise_start = Instant::now();
     // Quantising comes before welding (see `quantize`): positions that share a
