@@ -389,17 +389,19 @@ pub fn build_file_with(
     stage("load");
     let data = load::read_file(input)?;
     let fmt = load::detect_format(input, &data)?;
-    // A glTF's soup is checked by its loader, while the input's digest
-    // finishes; an OBJ's digest ends long before the parse, so its check
-    // comes after, on all threads.
-    let mut soup = match fmt {
+    // A glTF's soup is checked by its loader while the input's digest runs
+    // on, and the digest's last bytes are hashed beside the payload (see
+    // `load_gltf_deferred`); an OBJ's digest ends long before the parse,
+    // so its check comes after, on all threads.
+    let (mut soup, digest) = match fmt {
         load::Format::Gltf => {
-            load::gltf::load_gltf_checked(input, data, |s| check_soup_in(input, s, false))?
+            load::gltf::load_gltf_deferred(input, data, |s| check_soup_in(input, s, false))?
         }
         load::Format::Obj => {
             let soup = load::obj::load_obj(input, data)?;
             check_soup(input, &soup)?;
-            soup
+            let digest = load::PendingDigest::Done(soup.input_bytes, soup.input_sha256);
+            (soup, digest)
         }
     };
     timings.load = ms(start);
@@ -489,8 +491,9 @@ pub fn build_file_with(
                 load::Format::Gltf => "gltf".into(),
                 load::Format::Obj => "obj".into(),
             },
-            bytes: soup.input_bytes,
-            sha256: soup.input_sha256,
+            // Set from `digest` as the file is written.
+            bytes: 0,
+            sha256: [0; 32],
         },
         options: BuildOptions {
             max_mult: cfg.max_mult,
@@ -505,6 +508,8 @@ pub fn build_file_with(
     let write_start = Instant::now();
     let (header, file_bytes) = match &layout {
         Some(layout) => {
+            let mut header = header;
+            (header.input.bytes, header.input.sha256) = digest.finish();
             let mesh = MeshPayload {
                 header: mesh_header,
                 caps: &layout.caps,
@@ -514,7 +519,9 @@ pub fn build_file_with(
         }
         None => {
             let records = plan.records(&welded, &edges);
-            format::write_file_streamed(output, header, mesh_header, &records)?
+            format::write_file_streamed_finishing(output, header, mesh_header, &records, || {
+                digest.finish()
+            })?
         }
     };
     timings.write = ms(write_start);

@@ -714,9 +714,11 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
 /// Why: with no blocks behind it, every 4 KiB block a buffered write covers
 /// is reserved one by one (ext4's delayed allocation); with the blocks
 /// reserved in one call, the writes only look them up. Copying 128 MiB into
-/// the page cache here: 22.7–23.1 → 20.3–21.5 ms with one thread (the call
-/// included), 24.8–25.9 → 21.2–22.3 ms with two (a C probe, 1 MiB writes,
-/// 5 and 2 alternated runs). Only these two filesystems: on tmpfs, for one,
+/// the page cache here, 1 MiB per write: 21.2–21.4 → 18.9–19.5 ms (the call
+/// included; fastest of 5, two runs of `examples/file_write.rs`); the
+/// dragon's layout + write, 39.8 → 38.0 ms with one thread and 25.1 → 22.9
+/// ms with two (`benches/compare_binaries.py`, 7 rounds). Only these two
+/// filesystems: on tmpfs, for one,
 /// `fallocate` zeroes pages that the writes then overwrite. The reserved
 /// blocks are "unwritten" until written back, which the kernel does later,
 /// outside the build.
@@ -757,9 +759,30 @@ fn preallocate(file: &std::fs::File, size: u64) {
 /// The header, which holds the CRC, is written last, at the start.
 pub fn write_file_streamed(
     path: &Path,
+    header: Header,
+    mesh: MeshHeader,
+    source: &dyn PayloadSource,
+) -> Result<(Header, u64)> {
+    let input = (header.input.bytes, header.input.sha256);
+    write_file_streamed_finishing(path, header, mesh, source, move || input)
+}
+
+/// [`write_file_streamed`], the header's input byte count and SHA-256 given
+/// by `input`, which runs beside the payload (`rayon::join`): how a build
+/// finishes a digest its load left pending (`load::PendingDigest`).
+///
+/// Why: with two threads, one copies the payload into the page cache while
+/// the other fills records, and then waits, a third of the time: buffered
+/// writes to one file take its lock in turn (on ext4, two threads writing
+/// halves of one file take as long as one thread, two files half as long;
+/// `examples/file_write.rs`). Hashing the input's last bytes there costs
+/// the build little, where the load waited for them.
+pub fn write_file_streamed_finishing(
+    path: &Path,
     mut header: Header,
     mesh: MeshHeader,
     source: &dyn PayloadSource,
+    input: impl FnOnce() -> (u64, [u8; 32]) + Send,
 ) -> Result<(Header, u64)> {
     use rayon::prelude::*;
     let enc = header.options.encoding().map_err(Error::Other)?;
@@ -792,59 +815,65 @@ pub fn write_file_streamed(
     let size = container_len(&header);
     file.set_len(size).map_err(|e| Error::io(path, e))?;
     preallocate(file, size);
-    let crcs: Vec<Vec<crc32fast::Hasher>> = (0..units)
-        .into_par_iter()
-        .map_init(
-            || (Vec::<f32>::new(), Vec::<u8>::new()),
-            |(fbuf, bbuf), u| {
-                let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
-                // Not zeroed first: `fill` writes every float (which debug
-                // builds check with a sentinel). Zeroing was a memset of
-                // the whole output, 125 MB on the dragon.
-                let total = lens.iter().sum();
-                if fbuf.len() < total {
-                    fbuf.resize(total, 0.0);
-                }
-                let fbuf = &mut fbuf[..total];
-                if cfg!(debug_assertions) {
-                    fbuf.fill(f32::from_bits(UNWRITTEN));
-                }
-                let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
-                let mut rest = &mut fbuf[..];
-                for &n in &lens {
-                    let (mine, tail) = rest.split_at_mut(n);
-                    outs.push(mine);
-                    rest = tail;
-                }
-                source.fill(u, &mut outs);
-                debug_assert!(
-                    fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
-                    "unit {u}: the payload source left floats unwritten"
-                );
-                let mut hashes = Vec::with_capacity(sections);
-                let mut at = 0;
-                for (s, &n) in lens.iter().enumerate() {
-                    let piece = &fbuf[at..at + n];
-                    at += n;
-                    let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little") {
-                        bytemuck::cast_slice(piece)
-                    } else {
-                        bbuf.resize(n * per_float as usize, 0);
-                        let len = encode_floats(piece, enc, bbuf);
-                        &bbuf[..len]
-                    };
-                    let mut h = crc32fast::Hasher::new();
-                    h.update(bytes);
-                    if !bytes.is_empty() {
-                        write_at(file, bytes, starts[u * sections + s])
-                            .map_err(|e| Error::io(path, e))?;
+    let payload = || -> Result<Vec<Vec<crc32fast::Hasher>>> {
+        (0..units)
+            .into_par_iter()
+            .map_init(
+                || (Vec::<f32>::new(), Vec::<u8>::new()),
+                |(fbuf, bbuf), u| {
+                    let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
+                    // Not zeroed first: `fill` writes every float (which debug
+                    // builds check with a sentinel). Zeroing was a memset of
+                    // the whole output, 125 MB on the dragon.
+                    let total = lens.iter().sum();
+                    if fbuf.len() < total {
+                        fbuf.resize(total, 0.0);
                     }
-                    hashes.push(h);
-                }
-                Ok(hashes)
-            },
-        )
-        .collect::<Result<_>>()?;
+                    let fbuf = &mut fbuf[..total];
+                    if cfg!(debug_assertions) {
+                        fbuf.fill(f32::from_bits(UNWRITTEN));
+                    }
+                    let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
+                    let mut rest = &mut fbuf[..];
+                    for &n in &lens {
+                        let (mine, tail) = rest.split_at_mut(n);
+                        outs.push(mine);
+                        rest = tail;
+                    }
+                    source.fill(u, &mut outs);
+                    debug_assert!(
+                        fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
+                        "unit {u}: the payload source left floats unwritten"
+                    );
+                    let mut hashes = Vec::with_capacity(sections);
+                    let mut at = 0;
+                    for (s, &n) in lens.iter().enumerate() {
+                        let piece = &fbuf[at..at + n];
+                        at += n;
+                        let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little")
+                        {
+                            bytemuck::cast_slice(piece)
+                        } else {
+                            bbuf.resize(n * per_float as usize, 0);
+                            let len = encode_floats(piece, enc, bbuf);
+                            &bbuf[..len]
+                        };
+                        let mut h = crc32fast::Hasher::new();
+                        h.update(bytes);
+                        if !bytes.is_empty() {
+                            write_at(file, bytes, starts[u * sections + s])
+                                .map_err(|e| Error::io(path, e))?;
+                        }
+                        hashes.push(h);
+                    }
+                    Ok(hashes)
+                },
+            )
+            .collect()
+    };
+    let ((input_bytes, input_sha256), crcs) = rayon::join(input, payload);
+    let crcs = crcs?;
+    (header.input.bytes, header.input.sha256) = (input_bytes, input_sha256);
     // The payload's CRC: every section's pieces in unit order, then the
     // section's zero padding (as `write_records` writes it).
     let mut crc = crc32fast::Hasher::new();

@@ -14,7 +14,7 @@
 //! once, so a vertex deep in a node hierarchy with large translations does not
 //! pick up rounding error at every level.
 
-use super::{Part, Soup};
+use super::{InputDigest, Part, PendingDigest, Soup};
 use crate::error::{Error, Result};
 use crate::file_bytes::FileBytes;
 use base64::Engine as _;
@@ -56,34 +56,55 @@ const MAX_LISTED_PROBLEMS: usize = 3;
 /// accessor type, unsupported version or required geometry extension) is an
 /// [`Error::Input`]; NaN/Inf positions are passed through for later stages.
 pub fn load_gltf(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
-    load_gltf_checked(path, data, |_| Ok(()))
+    let (mut soup, digest) = load_gltf_deferred(path, data, |_| Ok(()))?;
+    (soup.input_bytes, soup.input_sha256) = digest.finish();
+    Ok(soup)
 }
 
-/// [`load_gltf`], then `check` of the soup, whose error is returned instead
-/// of the soup. Why: the check runs on this thread right after the
-/// decoding, while the digest's thread is usually still hashing (it covers
-/// the whole file, textures too, at 1.2–2 GB/s, and the decoding copies
-/// only the geometry); a build's `check_soup` after the load was 1.2–1.6 ms
-/// more of a two-thread build of the dragon's GLB, now hidden behind the
-/// 13 ms digest.
-pub fn load_gltf_checked(
+/// [`load_gltf`], then `check` of the soup (its error is returned instead),
+/// leaving the input's digest possibly unfinished: the soup's `input_bytes`
+/// and `input_sha256` are zero, and the [`PendingDigest`] gives them.
+///
+/// Why, in a build with two threads or more: the digest's thread hashes
+/// the whole file (textures too, 1.2–2 GB/s) while this one parses and
+/// decodes the geometry, which takes less time: on the dragon's GLB, 13 ms
+/// of hashing beside 6 ms of decoding. Here `check` runs in that time
+/// (`check_soup` after the load was 1.2–1.6 ms more of a two-thread
+/// build), then the digest stops where it has got to, the load returns,
+/// and the build hashes the rest beside the output's payload, where one
+/// thread waits on the other's copying into the page cache. A glTF with
+/// external buffers is hashed whole here, as [`load_gltf`] does.
+pub fn load_gltf_deferred(
     path: &Path,
     data: impl Into<FileBytes>,
     check: impl FnOnce(&Soup) -> Result<()>,
-) -> Result<Soup> {
+) -> Result<(Soup, PendingDigest)> {
     let data: FileBytes = data.into();
     // The digest starts on the file's bytes now, beside the parse (see
     // `DigestHead`), and takes the external buffers once they are read.
-    super::with_digest_head(&data, |head| load_gltf_with(path, &data, head, check))
+    let (soup, head) =
+        super::with_digest_head(&data, |head| load_gltf_with(path, &data, head, check))?;
+    let digest = match head {
+        // Bytes left: the build hashes them (and keeps `data` until then).
+        Some((digest, from)) if from < data.len() => PendingDigest::Rest { digest, data, from },
+        Some((digest, _)) => {
+            let (bytes, sha) = digest.finish();
+            PendingDigest::Done(bytes, sha)
+        }
+        None => PendingDigest::Done(soup.input_bytes, soup.input_sha256),
+    };
+    Ok((soup, digest))
 }
 
-/// [`load_gltf_checked`] of `data`, whose digest `head` has begun.
+/// [`load_gltf_deferred`] of `data`, whose digest `head` has begun: the soup
+/// with its digest, or without it and the digest of the file so far with
+/// the number of bytes it covers.
 fn load_gltf_with(
     path: &Path,
     data: &FileBytes,
     head: super::DigestHead<'_>,
     check: impl FnOnce(&Soup) -> Result<()>,
-) -> Result<Soup> {
+) -> Result<(Soup, Option<(InputDigest, usize)>)> {
     let mut warnings = Vec::new();
 
     let container = split_container(path, data, &mut warnings)?;
@@ -114,28 +135,37 @@ fn load_gltf_with(
 
     // The input's SHA-256 covers the file, then the external buffers it
     // read, in read order. Every byte is in memory now, so the digest is
-    // completed beside the decoding when there are threads to spare (see
+    // completed beside the decoding when there are threads to spare, or,
+    // for a file alone, left to the caller where it has got to (see
     // `DigestHead`).
     let rest: Vec<&[u8]> = external
         .iter()
         .filter_map(|&b| ctx.buffers[b].as_deref())
         .collect();
-    let ((input_bytes, input_sha256), built) = head.finish_while(&rest, || {
+    let decode = || {
         let mut soup = Soup::default();
         reserve_soup(&ctx, &instances, &mut soup);
         build_soup(&ctx, &instances, &mut soup, &mut warnings)?;
         check(&soup)?;
         Ok(soup)
-    });
+    };
+    let (whole, so_far, built) = if rest.is_empty() {
+        let (so_far, built) = head.stop_after(decode);
+        (None, Some(so_far), built)
+    } else {
+        let (whole, built) = head.finish_while(&rest, decode);
+        (Some(whole), None, built)
+    };
     let mut soup = built?;
     soup.input_vertices = soup.positions.len() as u64;
     if soup.indices.is_empty() {
         warnings.push("no triangles found in the scene".to_string());
     }
     soup.stats.warnings = warnings;
-    soup.input_bytes = input_bytes;
-    soup.input_sha256 = input_sha256;
-    Ok(soup)
+    if let Some((bytes, sha)) = whole {
+        (soup.input_bytes, soup.input_sha256) = (bytes, sha);
+    }
+    Ok((soup, so_far))
 }
 
 // ---------------------------------------------------------------------------

@@ -139,7 +139,8 @@ pub fn digest_while<T>(parts: &[&[u8]], work: impl FnOnce() -> T) -> ((u64, [u8;
 
 /// The digest of an input's first part (the file itself), started on
 /// another thread before the rest of what it covers is known, and
-/// completed by [`DigestHead::finish_while`].
+/// completed by [`DigestHead::finish_while`] or stopped part way by
+/// [`DigestHead::stop_after`].
 ///
 /// Why: a glTF's external buffers are known only once its JSON is parsed,
 /// so the digest used to start after the parse, and with two threads the
@@ -147,37 +148,40 @@ pub fn digest_while<T>(parts: &[&[u8]], work: impl FnOnce() -> T) -> ((u64, [u8;
 /// 6 ms decode). Started when the file is read, it also runs beside the
 /// JSON parse and checks. It starts a thread only where [`digest_while`]
 /// would (two threads or more in the calling pool, a large enough file);
-/// otherwise `finish_while` is `digest_while`. The digest is the same
-/// either way.
+/// otherwise the digest is computed on the calling thread. The digest is
+/// the same either way.
 pub(crate) struct DigestHead<'s> {
-    /// The hashing thread: the digest of `first`, or `None` if cancelled.
-    thread: Option<std::thread::ScopedJoinHandle<'s, Option<InputDigest>>>,
+    /// The hashing thread: the digest of the first `n` bytes of `first`
+    /// (all of them unless stopped).
+    thread: Option<std::thread::ScopedJoinHandle<'s, (InputDigest, usize)>>,
     first: &'s [u8],
-    /// Set when the head is dropped unfinished (the load failed): the
-    /// thread stops at its next block instead of hashing the whole file.
-    cancel: &'s std::sync::atomic::AtomicBool,
+    /// Set to make the thread stop at its next block and hand back what it
+    /// has (by [`DigestHead::stop_after`], or on drop when the load fails).
+    stop: &'s std::sync::atomic::AtomicBool,
 }
 
 /// Runs `body` with a [`DigestHead`] of `first` (hashing it from now on,
 /// see there).
 pub(crate) fn with_digest_head<R>(first: &[u8], body: impl FnOnce(DigestHead<'_>) -> R) -> R {
     use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
-    let cancel = AtomicBool::new(false);
+    let stop = AtomicBool::new(false);
     std::thread::scope(|scope| {
         let thread = (first.len() >= CONCURRENT_DIGEST_MIN && rayon::current_num_threads() >= 2)
             .then(|| {
-                let cancel = &cancel;
+                let stop = &stop;
                 std::thread::Builder::new()
                     .name("svpack-sha256".into())
                     .spawn_scoped(scope, move || {
                         let mut digest = InputDigest::default();
+                        let mut hashed = 0;
                         for block in first.chunks(HEAD_BLOCK) {
-                            if cancel.load(Relaxed) {
-                                return None;
+                            if stop.load(Relaxed) {
+                                break;
                             }
                             digest.update(block);
+                            hashed += block.len();
                         }
-                        Some(digest)
+                        (digest, hashed)
                     })
                     .ok()
             })
@@ -185,14 +189,14 @@ pub(crate) fn with_digest_head<R>(first: &[u8], body: impl FnOnce(DigestHead<'_>
         body(DigestHead {
             thread,
             first,
-            cancel: &cancel,
+            stop: &stop,
         })
     })
 }
 
-/// Bytes [`with_digest_head`]'s thread hashes between looks at its cancel
-/// flag.
-const HEAD_BLOCK: usize = 1 << 20;
+/// Bytes [`with_digest_head`]'s thread hashes between looks at its stop
+/// flag: a stop waits for at most one block (about 0.2 ms).
+const HEAD_BLOCK: usize = 256 << 10;
 
 impl DigestHead<'_> {
     /// The digest of the first part and then `rest` (fed in order), computed
@@ -215,15 +219,15 @@ impl DigestHead<'_> {
             let tail = std::thread::Builder::new()
                 .name("svpack-sha256".into())
                 .spawn_scoped(scope, move || {
-                    let mut digest = head.join().ok().flatten()?;
+                    let (mut digest, hashed) = head.join().ok()?;
+                    digest.update(&first[hashed..]);
                     for part in rest {
                         digest.update(part);
                     }
                     Some(digest.finish())
                 });
             let result = work();
-            // If a thread could not be started, died or was cancelled,
-            // hash here instead.
+            // If a thread could not be started or died, hash here instead.
             let digest = match tail.map(|t| t.join()) {
                 Ok(Ok(Some(digest))) => digest,
                 _ => all(),
@@ -231,13 +235,69 @@ impl DigestHead<'_> {
             (digest, result)
         })
     }
+
+    /// Runs `work` on this thread, then stops the digest of the first part
+    /// where its thread has got to and returns it with the number of bytes
+    /// it covers, and `work`'s result. Without a thread the first part is
+    /// hashed here, whole, before `work` (one thread means one core).
+    ///
+    /// Why: a build needs the digest only for the header, written last; the
+    /// bytes left are hashed beside the output's payload (see
+    /// `format::write_file_streamed`), which one thread spends copying into
+    /// the page cache, instead of making the other thread wait idle at the
+    /// end of the load.
+    pub(crate) fn stop_after<T>(mut self, work: impl FnOnce() -> T) -> ((InputDigest, usize), T) {
+        let first = self.first;
+        let Some(head) = self.thread.take() else {
+            let mut digest = InputDigest::default();
+            digest.update(first);
+            return ((digest, first.len()), work());
+        };
+        let result = work();
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        let digest = head.join().unwrap_or_else(|_| (InputDigest::default(), 0));
+        (digest, result)
+    }
 }
 
 impl Drop for DigestHead<'_> {
     fn drop(&mut self) {
         if self.thread.is_some() {
-            self.cancel
-                .store(true, std::sync::atomic::Ordering::Relaxed);
+            self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+}
+
+/// An input's byte count and SHA-256, possibly with bytes still to hash:
+/// what a loader hands a build that finishes the digest later
+/// ([`gltf::load_gltf_deferred`]).
+pub enum PendingDigest {
+    /// The byte count and digest, complete.
+    Done(u64, [u8; 32]),
+    /// The digest of `data[..from]`, to be continued with `data[from..]`.
+    Rest {
+        /// The digest so far.
+        digest: InputDigest,
+        /// The bytes it covers, in full.
+        data: FileBytes,
+        /// How many of them are hashed.
+        from: usize,
+    },
+}
+
+impl PendingDigest {
+    /// The byte count and SHA-256 of everything, hashing what is left.
+    pub fn finish(self) -> (u64, [u8; 32]) {
+        match self {
+            PendingDigest::Done(bytes, sha) => (bytes, sha),
+            PendingDigest::Rest {
+                mut digest,
+                data,
+                from,
+            } => {
+                digest.update(&data[from..]);
+                digest.finish()
+            }
         }
     }
 }
