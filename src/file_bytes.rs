@@ -52,6 +52,41 @@ impl FileBytes {
             FileBytes::Mapped(m) => m.to_vec(),
         }
     }
+
+    /// Says the first `len` bytes will not be read again: a mapped file's
+    /// whole pages among them leave the process's resident set (they stay
+    /// in the page cache, and would come back on a read); read bytes stay.
+    /// For a build that keeps an input only to finish its digest (see
+    /// `load::PendingDigest`): 15 MiB of the dragon's GLB are mapped from
+    /// its load to its write.
+    pub fn release_prefix(&self, len: usize) {
+        #[cfg(unix)]
+        if let FileBytes::Mapped(m) = self {
+            let len = len.min(m.len()) & !(page_size() - 1);
+            if len > 0 {
+                // SAFETY: the mapping is read-only and of a file, so
+                // MADV_DONTNEED only drops page-table entries: a later read
+                // faults the same bytes back in from the file (under the
+                // module's contract that nobody rewrites it).
+                let _ =
+                    unsafe { m.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, 0, len) };
+            }
+        }
+        #[cfg(not(unix))]
+        let _ = len;
+    }
+}
+
+/// The system's page size, a power of two.
+#[cfg(unix)]
+fn page_size() -> usize {
+    // SAFETY: `sysconf` has no preconditions.
+    let n = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    if n > 0 && (n as usize).is_power_of_two() {
+        n as usize
+    } else {
+        4096
+    }
 }
 
 /// The bytes of the file at `path`: mapped (pages populated up front) when
@@ -71,4 +106,54 @@ pub fn read_or_map(path: &Path) -> std::io::Result<FileBytes> {
     let mut data = Vec::with_capacity(len as usize);
     std::io::Read::read_to_end(&mut &file, &mut data)?;
     Ok(FileBytes::Read(data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The resident kilobytes of the mapping that starts at `addr`, from
+    /// `/proc/self/smaps` (per mapping, so other tests' memory does not
+    /// count).
+    #[cfg(target_os = "linux")]
+    fn resident_kib(addr: usize) -> u64 {
+        let smaps = std::fs::read_to_string("/proc/self/smaps").unwrap();
+        let mut lines = smaps.lines();
+        while let Some(line) = lines.next() {
+            let start = line.split('-').next().unwrap_or("");
+            if usize::from_str_radix(start, 16) == Ok(addr) {
+                for l in lines.by_ref() {
+                    if let Some(v) = l.strip_prefix("Rss:") {
+                        return v.trim().trim_end_matches("kB").trim().parse().unwrap();
+                    }
+                }
+            }
+        }
+        panic!("no mapping at {addr:#x}");
+    }
+
+    /// A mapped file's released prefix leaves the mapping's resident set and
+    /// reads back the same. Caught: a release that does nothing (the
+    /// resident set stays whole).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn released_prefix_leaves_the_resident_set_and_reads_the_same() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.bin");
+        let bytes: Vec<u8> = (0..8u32 << 20).map(|i| (i * 31 / 7) as u8).collect();
+        std::fs::write(&path, &bytes).unwrap();
+        let data = read_or_map(&path).unwrap();
+        let FileBytes::Mapped(m) = &data else {
+            panic!("an 8 MiB file is mapped");
+        };
+        let addr = m.as_ptr() as usize;
+        assert_eq!(resident_kib(addr), 8 << 10, "populated when mapped");
+        data.release_prefix((6 << 20) + 100);
+        assert_eq!(resident_kib(addr), 2 << 10);
+        assert!(data[..] == bytes[..]);
+        // Read bytes are kept as they are.
+        let read = FileBytes::Read(bytes.clone());
+        read.release_prefix(1 << 20);
+        assert!(read[..] == bytes[..]);
+    }
 }

@@ -86,7 +86,10 @@ pub fn load_gltf_deferred(
         super::with_digest_head(&data, |head| load_gltf_with(path, &data, head, check))?;
     let digest = match head {
         // Bytes left: the build hashes them (and keeps `data` until then).
-        Some((digest, from)) if from < data.len() => PendingDigest::Rest { digest, data, from },
+        Some((digest, from)) if from < data.len() => {
+            data.release_prefix(from);
+            PendingDigest::Rest { digest, data, from }
+        }
         Some((digest, _)) => {
             let (bytes, sha) = digest.finish();
             PendingDigest::Done(bytes, sha)
