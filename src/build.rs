@@ -519,9 +519,15 @@ pub fn build_file_with(
         }
         None => {
             let records = plan.records(&welded, &edges);
-            format::write_file_streamed_finishing(output, header, mesh_header, &records, || {
-                digest.finish()
-            })?
+            let digest = load::DigestSlices::new(digest);
+            format::write_file_streamed_finishing(
+                output,
+                header,
+                mesh_header,
+                &records,
+                &|| digest.step(),
+                || digest.finish(),
+            )?
         }
     };
     timings.write = ms(write_start);

@@ -764,27 +764,33 @@ pub fn write_file_streamed(
     source: &dyn PayloadSource,
 ) -> Result<(Header, u64)> {
     let input = (header.input.bytes, header.input.sha256);
-    write_file_streamed_finishing(path, header, mesh, source, move || input)
+    write_file_streamed_finishing(path, header, mesh, source, &|| false, move || input)
 }
 
-/// [`write_file_streamed`], the header's input byte count and SHA-256 given
-/// by `input`, which runs beside the payload (`rayon::join`): how a build
-/// finishes a digest its load left pending (`load::PendingDigest`).
+/// [`write_file_streamed`], with the header's input byte count and SHA-256
+/// given by `input` once the payload is written, and `side` called, a slice
+/// of work at a time, by a thread about to write while another is writing:
+/// how a build finishes a digest its load left pending
+/// (`load::DigestSlices`). `side` returns false once it has nothing left.
 ///
-/// Why: with two threads, one copies the payload into the page cache while
-/// the other fills records, and then waits, a third of the time: buffered
-/// writes to one file take its lock in turn (on ext4, two threads writing
-/// halves of one file take as long as one thread, two files half as long;
-/// `examples/file_write.rs`). Hashing the input's last bytes there costs
-/// the build little, where the load waited for them.
+/// Why: buffered writes to one file take its lock in turn (on ext4, two
+/// threads writing halves of one file take as long as one thread, two
+/// files half as long; `examples/file_write.rs`), so with two threads one
+/// copies while the other fills the next unit and then waits, about a
+/// third of the write stage: hashing there costs the build almost nothing,
+/// where the load waited for it. (The hashing as one task beside the
+/// payload, `rayon::join`, made the dragon's write stage 3 ms longer:
+/// the other thread then filled and copied alone.)
 pub fn write_file_streamed_finishing(
     path: &Path,
     mut header: Header,
     mesh: MeshHeader,
     source: &dyn PayloadSource,
-    input: impl FnOnce() -> (u64, [u8; 32]) + Send,
+    side: &(dyn Fn() -> bool + Sync),
+    input: impl FnOnce() -> (u64, [u8; 32]),
 ) -> Result<(Header, u64)> {
     use rayon::prelude::*;
+    use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
     let enc = header.options.encoding().map_err(Error::Other)?;
     let per_float = enc.vec4_bytes() / 4;
     let sections = 1 + mesh.buckets.len();
@@ -815,65 +821,72 @@ pub fn write_file_streamed_finishing(
     let size = container_len(&header);
     file.set_len(size).map_err(|e| Error::io(path, e))?;
     preallocate(file, size);
-    let payload = || -> Result<Vec<Vec<crc32fast::Hasher>>> {
-        (0..units)
-            .into_par_iter()
-            .map_init(
-                || (Vec::<f32>::new(), Vec::<u8>::new()),
-                |(fbuf, bbuf), u| {
-                    let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
-                    // Not zeroed first: `fill` writes every float (which debug
-                    // builds check with a sentinel). Zeroing was a memset of
-                    // the whole output, 125 MB on the dragon.
-                    let total = lens.iter().sum();
-                    if fbuf.len() < total {
-                        fbuf.resize(total, 0.0);
-                    }
-                    let fbuf = &mut fbuf[..total];
-                    if cfg!(debug_assertions) {
-                        fbuf.fill(f32::from_bits(UNWRITTEN));
-                    }
-                    let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
-                    let mut rest = &mut fbuf[..];
-                    for &n in &lens {
-                        let (mine, tail) = rest.split_at_mut(n);
-                        outs.push(mine);
-                        rest = tail;
-                    }
-                    source.fill(u, &mut outs);
-                    debug_assert!(
-                        fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
-                        "unit {u}: the payload source left floats unwritten"
-                    );
-                    let mut hashes = Vec::with_capacity(sections);
-                    let mut at = 0;
-                    for (s, &n) in lens.iter().enumerate() {
-                        let piece = &fbuf[at..at + n];
-                        at += n;
-                        let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little")
-                        {
-                            bytemuck::cast_slice(piece)
-                        } else {
-                            bbuf.resize(n * per_float as usize, 0);
-                            let len = encode_floats(piece, enc, bbuf);
-                            &bbuf[..len]
-                        };
-                        let mut h = crc32fast::Hasher::new();
-                        h.update(bytes);
-                        if !bytes.is_empty() {
-                            write_at(file, bytes, starts[u * sections + s])
-                                .map_err(|e| Error::io(path, e))?;
+    // Set while a thread writes (a hint: two threads may both write, and
+    // the kernel then serialises them as before).
+    let writing = AtomicBool::new(false);
+    let crcs: Vec<Vec<crc32fast::Hasher>> = (0..units)
+        .into_par_iter()
+        .map_init(
+            || (Vec::<f32>::new(), Vec::<u8>::new()),
+            |(fbuf, bbuf), u| {
+                let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
+                // Not zeroed first: `fill` writes every float (which debug
+                // builds check with a sentinel). Zeroing was a memset of
+                // the whole output, 125 MB on the dragon.
+                let total = lens.iter().sum();
+                if fbuf.len() < total {
+                    fbuf.resize(total, 0.0);
+                }
+                let fbuf = &mut fbuf[..total];
+                if cfg!(debug_assertions) {
+                    fbuf.fill(f32::from_bits(UNWRITTEN));
+                }
+                let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
+                let mut rest = &mut fbuf[..];
+                for &n in &lens {
+                    let (mine, tail) = rest.split_at_mut(n);
+                    outs.push(mine);
+                    rest = tail;
+                }
+                source.fill(u, &mut outs);
+                debug_assert!(
+                    fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
+                    "unit {u}: the payload source left floats unwritten"
+                );
+                let mut hashes = Vec::with_capacity(sections);
+                let mut at = 0;
+                for (s, &n) in lens.iter().enumerate() {
+                    let piece = &fbuf[at..at + n];
+                    at += n;
+                    let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little") {
+                        bytemuck::cast_slice(piece)
+                    } else {
+                        bbuf.resize(n * per_float as usize, 0);
+                        let len = encode_floats(piece, enc, bbuf);
+                        &bbuf[..len]
+                    };
+                    let mut h = crc32fast::Hasher::new();
+                    h.update(bytes);
+                    if !bytes.is_empty() {
+                        // Another thread's write holds the file: side work
+                        // until it is done (or none is left).
+                        while writing.load(Relaxed) {
+                            if !side() {
+                                break;
+                            }
                         }
-                        hashes.push(h);
+                        writing.store(true, Relaxed);
+                        let written = write_at(file, bytes, starts[u * sections + s]);
+                        writing.store(false, Relaxed);
+                        written.map_err(|e| Error::io(path, e))?;
                     }
-                    Ok(hashes)
-                },
-            )
-            .collect()
-    };
-    let ((input_bytes, input_sha256), crcs) = rayon::join(input, payload);
-    let crcs = crcs?;
-    (header.input.bytes, header.input.sha256) = (input_bytes, input_sha256);
+                    hashes.push(h);
+                }
+                Ok(hashes)
+            },
+        )
+        .collect::<Result<_>>()?;
+    (header.input.bytes, header.input.sha256) = input();
     // The payload's CRC: every section's pieces in unit order, then the
     // section's zero padding (as `write_records` writes it).
     let mut crc = crc32fast::Hasher::new();
