@@ -111,7 +111,7 @@ pub fn check_soup(path: &Path, soup: &Soup) -> Result<()> {
 
 /// [`check_soup`], its fast path on this thread alone unless `parallel`
 /// (for a check that runs beside another thread's work, see
-/// `load::gltf::load_gltf_checked`).
+/// `load::gltf::load_gltf_deferred`).
 fn check_soup_in(path: &Path, soup: &Soup, parallel: bool) -> Result<()> {
     if !soup.indices.len().is_multiple_of(3) {
         return Err(Error::input(path, "index count is not a multiple of 3"));
@@ -390,9 +390,10 @@ pub fn build_file_with(
     let data = load::read_file(input)?;
     let fmt = load::detect_format(input, &data)?;
     // A glTF's soup is checked by its loader while the input's digest runs
-    // on, and the digest's last bytes are hashed beside the payload (see
-    // `load_gltf_deferred`); an OBJ's digest ends long before the parse,
-    // so its check comes after, on all threads.
+    // on, and the digest's last bytes are hashed while the payload is
+    // written (`load_gltf_deferred`, `load::DigestSlices`); an OBJ's
+    // digest ends long before the parse, so its check comes after, on all
+    // threads.
     let (mut soup, digest) = match fmt {
         load::Format::Gltf => {
             load::gltf::load_gltf_deferred(input, data, |s| check_soup_in(input, s, false))?

@@ -718,10 +718,9 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
 /// included; fastest of 5, two runs of `examples/file_write.rs`); the
 /// dragon's layout + write, 39.8 → 38.0 ms with one thread and 25.1 → 22.9
 /// ms with two (`benches/compare_binaries.py`, 7 rounds). Only these two
-/// filesystems: on tmpfs, for one,
-/// `fallocate` zeroes pages that the writes then overwrite. The reserved
-/// blocks are "unwritten" until written back, which the kernel does later,
-/// outside the build.
+/// filesystems: on tmpfs, for one, `fallocate` zeroes pages that the
+/// writes then overwrite. The reserved blocks are "unwritten" until written
+/// back, which the kernel does later, outside the build.
 fn preallocate(file: &std::fs::File, size: u64) {
     #[cfg(target_os = "linux")]
     {
