@@ -636,13 +636,7 @@ mod tests {
     /// component.
     #[test]
     fn bounds_match_a_plain_fold() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = crate::multiplicity::test_bits(0x9e37_79b9_7f4a_7c15);
         for n in (0..60).chain([1000, 4099]) {
             let pos: Vec<[f32; 3]> = (0..n)
                 .map(|_| {
