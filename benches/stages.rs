@@ -209,6 +209,19 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
             )
         })
     });
+    // The same without pass 3's AVX-512 kernel (the scalar emit every
+    // build ran before the thirteenth round, and runs where the CPU lacks
+    // AVX-512).
+    g.bench_function(format!("opposites_only_scalar/{n}"), |b| {
+        svpack::evaluate_simd::disable_avx512(true);
+        b.iter(|| {
+            topology::build_edges_opposites_only(
+                black_box(&m.welded.triangles),
+                m.welded.positions.len(),
+            )
+        });
+        svpack::evaluate_simd::disable_avx512(false);
+    });
     g.bench_function(format!("previous_sort/{n}"), |b| {
         b.iter(|| {
             topology_sort::build_edges(black_box(&m.welded.triangles), m.welded.positions.len())

@@ -91,7 +91,10 @@ impl Edges {
 ///    listings, already read (8 bytes a listing, at most two records of 4),
 ///    its triangles straight to their final place, and its edges one after
 ///    the other from the group's first record's offset (edges never
-///    outnumber records).
+///    outnumber records). Where the CPU has AVX-512, a vertex with at most
+///    8 records is done in registers (`emit_range_avx512`): 13.7–14.1 →
+///    9.1–9.3 ms on the dragon, one thread (`cargo run --release --example
+///    stage_probe -- passes`, the two versions alternated).
 /// 4. **Compact**: each group's opposite vertices and edges are moved down
 ///    after the previous groups' (one move per group and array), and the
 ///    listings' memory becomes `opp`.
@@ -112,7 +115,7 @@ impl Edges {
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles)).0
+    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles), false).0
 }
 
 /// [`build_edges`] without `opp_tri` (left empty): what a build needs, since
@@ -121,7 +124,13 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
 /// triangle) pair (60 MB on a 5M-triangle scene), all of it fresh pages,
 /// and one write per record less.
 pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<false>(triangles, vertex_count, chunks_for(triangles)).0
+    build_edges_in::<false>(
+        triangles,
+        vertex_count,
+        chunks_for(triangles),
+        simd_available(),
+    )
+    .0
 }
 
 /// [`build_edges_opposites_only`], with the wall time of each of its four
@@ -130,7 +139,12 @@ pub fn build_edges_opposites_only_timed(
     triangles: &[u32],
     vertex_count: usize,
 ) -> (Edges, PassTimes) {
-    build_edges_in::<false>(triangles, vertex_count, chunks_for(triangles))
+    build_edges_in::<false>(
+        triangles,
+        vertex_count,
+        chunks_for(triangles),
+        simd_available(),
+    )
 }
 
 /// Wall time of each pass of [`build_edges`] (see there for the passes).
@@ -157,11 +171,13 @@ fn chunks_for(triangles: &[u32]) -> usize {
 
 /// [`build_edges`] (with `opp_tri` when `TRI`) with the triangles cut into
 /// `chunks` chunks for the count and list passes (tests use it to vary the
-/// cut), and the passes' times.
+/// cut), pass 3's AVX-512 kernel when `simd` (the CPU must have it; tests
+/// run both), and the passes' times.
 fn build_edges_in<const TRI: bool>(
     triangles: &[u32],
     vertex_count: usize,
     chunks: usize,
+    simd: bool,
 ) -> (Edges, PassTimes) {
     use rayon::prelude::*;
     use std::time::Instant;
@@ -361,90 +377,30 @@ fn build_edges_in<const TRI: bool>(
             |buf: &mut Vec<[u32; 4]>, (g, [ot, oa, ob, os])| {
                 let first = group_start[g] * RANGE;
                 let last = (group_start[g + 1] * RANGE).min(vertex_count);
-                let (mut no, mut ne) = (0usize, 0usize);
-                let base = rec_start[group_start[g]] as u32;
                 let m = oa.len();
-                let oo = (list_at as *mut u32).wrapping_add(records_at(g));
-                for v in first..last {
-                    let (from, to) = (start[v] as usize, start[v + 1] as usize);
-                    // SAFETY: listings `from..to` are in `list` (pass 2
-                    // wrote them all) and no record has been written over
-                    // them yet (see where `e` is made); the slice is not
-                    // used once this vertex's records are written.
-                    let listed: &[[u32; 2]] = unsafe {
-                        std::slice::from_raw_parts(
-                            (list_at as *const [u32; 2]).add(from),
-                            to - from,
-                        )
-                    };
-                    // Two record slots per listing, plus the block padding.
-                    let need = 2 * listed.len() + SMALL_RUN;
-                    if buf.len() < need {
-                        buf.resize(need, [0; 4]);
-                    }
-                    let mut k = 0;
-                    for (j, &[p, q]) in listed.iter().enumerate() {
-                        // Records are [_, larger endpoint, opposite, order]:
-                        // the listing itself, and when it was listed under
-                        // lo (p < q) also its swap. Both slots are written
-                        // without a branch (the kinds alternate
-                        // unpredictably); a mid listing's second slot is
-                        // overwritten by the next record. `order` is the
-                        // triangle, or without TRI the listing's rank,
-                        // which follows triangle order just the same.
-                        let order = if TRI { list_t[from + j] } else { j as u32 };
-                        buf[k] = [0, p, q, order];
-                        buf[k + 1] = [0, q, p, order];
-                        k += 1 + usize::from(p < q);
-                    }
-                    // Pass 1 counted this group's records, so this holds; it
-                    // is checked because the writes below are unchecked.
-                    assert!(no + k <= m, "topology: records miscounted");
-                    // Writes one record, in order: its opposite vertex (and
-                    // triangle) at the next record slot, and an edge slot;
-                    // only the last record of each larger endpoint's run
-                    // advances past that slot (no branch: it would
-                    // mispredict on about every other record). The edge's
-                    // range ends here, a global position in `opp`. `ne` never
-                    // passes the records seen before this one, so the slot
-                    // exists.
-                    let mut put = |rec: &[u32; 4], run_ends: bool| {
-                        // SAFETY: `no < m` (asserted above), and the group's
-                        // first `m` u32 from `oo` lie inside its listings
-                        // (see where `e` is made), which only this job
-                        // touches.
-                        unsafe { oo.add(no).write(rec[2]) };
-                        if TRI {
-                            ot[no] = MaybeUninit::new(rec[3]);
-                        }
-                        no += 1;
-                        oa[ne] = MaybeUninit::new(v as u32);
-                        ob[ne] = MaybeUninit::new(rec[1]);
-                        os[ne] = MaybeUninit::new(base + no as u32);
-                        ne += usize::from(run_ends);
-                    };
-                    // By larger endpoint, then triangle: the listings are in
-                    // triangle order and a triangle has one record per larger
-                    // endpoint, so a stable sort by larger endpoint and the
-                    // standard unstable sort on (larger, triangle) agree.
-                    if k <= SMALL_RUN {
-                        let order = sort_small(buf[..SMALL_RUN].try_into().unwrap(), k);
-                        for j in 0..k {
-                            let (key, next) = (order[j] >> 32, order[j + 1] >> 32);
-                            put(&buf[order[j] as usize % SMALL_RUN], next != key);
-                        }
-                    } else {
-                        let sorted = &mut buf[..k];
-                        sorted.sort_unstable_by_key(|r| (u64::from(r[1]) << 32) | u64::from(r[3]));
-                        for (i, rec) in sorted.iter().enumerate() {
-                            put(rec, sorted.get(i + 1).is_none_or(|nx| nx[1] != rec[1]));
-                        }
-                    }
-                }
+                let mut out = GroupOut {
+                    // SAFETY (of the writes through it): the group's first `m`
+                    // u32 from here lie inside its listings (see where `e` is
+                    // made), which only this job touches.
+                    opp: (list_at as *mut u32).wrapping_add(records_at(g)),
+                    tri: ot,
+                    a: oa,
+                    b: ob,
+                    end: os,
+                    base: rec_start[group_start[g]] as u32,
+                    records: 0,
+                    edges: 0,
+                };
+                let listings = Listings {
+                    start: &start,
+                    at: list_at as *const [u32; 2],
+                    tri: &list_t,
+                };
+                emit_group::<TRI>(&mut out, &listings, first..last, buf, simd);
                 // The group's records filled its `m` slots (and its range of
                 // `opp_tri`): pass 1 counted them.
-                assert_eq!(no, m, "topology: records miscounted");
-                ne
+                assert_eq!(out.records, m, "topology: records miscounted");
+                out.edges
             },
         )
         .collect();
@@ -528,6 +484,313 @@ fn build_edges_in<const TRI: bool>(
         compact: emitted.elapsed(),
     };
     (e, times)
+}
+
+/// One group's output in pass 3 of [`build_edges`]: where its records and
+/// edges go, and how many of each it has written so far.
+struct GroupOut<'a> {
+    /// The group's records (opposite vertices), written over its own
+    /// listings from their start.
+    opp: *mut u32,
+    /// Its range of `opp_tri` (empty without it).
+    tri: &'a mut [MaybeUninit<u32>],
+    /// Its ranges of `a`, `b` and `opp_start` (past the first entry),
+    /// sized for its records: it has no more edges than records.
+    a: &'a mut [MaybeUninit<u32>],
+    b: &'a mut [MaybeUninit<u32>],
+    end: &'a mut [MaybeUninit<u32>],
+    /// Position in `opp` of the group's first record.
+    base: u32,
+    /// Records written.
+    records: usize,
+    /// Edges written.
+    edges: usize,
+}
+
+/// The listings pass 2 wrote, as pass 3 reads them.
+struct Listings<'a> {
+    /// `start[v]..start[v + 1]` are vertex v's listings.
+    start: &'a [u32],
+    /// The listings, as an address: pass 3 writes records over those it has
+    /// read.
+    at: *const [u32; 2],
+    /// Each listing's triangle (empty without `opp_tri`).
+    tri: &'a [u32],
+}
+
+impl Listings<'_> {
+    /// Vertex `v`'s first listing and its listings.
+    ///
+    /// # Safety
+    /// No record may have been written over them yet, and the slice must
+    /// not be used once a record of `v` is written.
+    #[inline(always)]
+    unsafe fn of(&self, v: usize) -> (usize, &[[u32; 2]]) {
+        let (from, to) = (self.start[v] as usize, self.start[v + 1] as usize);
+        // SAFETY: pass 2 wrote listings `from..to`; the caller keeps them
+        // unchanged while the slice is used.
+        (from, unsafe {
+            std::slice::from_raw_parts(self.at.add(from), to - from)
+        })
+    }
+}
+
+/// Pass 3 of [`build_edges`] for a group's `vertices`, with the AVX-512
+/// kernel when `simd` (never with `opp_tri`, which `lint` alone asks for).
+#[inline(always)]
+fn emit_group<const TRI: bool>(
+    out: &mut GroupOut,
+    listings: &Listings,
+    vertices: std::ops::Range<usize>,
+    buf: &mut Vec<[u32; 4]>,
+    simd: bool,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if !TRI && simd {
+        // SAFETY: `simd` is set only where the CPU has AVX-512F and
+        // AVX-512VL (`simd_available`).
+        return unsafe { emit_range_avx512(out, listings, vertices, buf) };
+    }
+    let _ = simd;
+    for v in vertices {
+        // SAFETY: vertices are emitted in order, and a vertex's records
+        // only reach listings already read (see where `e` is made).
+        let (from, listed) = unsafe { listings.of(v) };
+        emit_vertex::<TRI>(out, v as u32, from, listed, listings.tri, buf);
+    }
+}
+
+/// Whether pass 3 may run its AVX-512 kernel: the CPU has AVX-512F and
+/// AVX-512VL (run-time check) and `evaluate_simd::disable_avx512` has not
+/// turned the crate's AVX-512 kernels off.
+fn simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        crate::evaluate_simd::have_avx512() && std::arch::is_x86_feature_detected!("avx512vl")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Pass 3 for vertex `v`, whose listings `listed` start at `from`: its
+/// records sorted by larger endpoint, stably (so by triangle within an
+/// edge), its opposite vertices (and triangles) written in that order, and
+/// one edge per larger endpoint.
+#[inline(always)]
+fn emit_vertex<const TRI: bool>(
+    out: &mut GroupOut,
+    v: u32,
+    from: usize,
+    listed: &[[u32; 2]],
+    tri: &[u32],
+    buf: &mut Vec<[u32; 4]>,
+) {
+    // Two record slots per listing, plus the block padding.
+    let need = 2 * listed.len() + SMALL_RUN;
+    if buf.len() < need {
+        buf.resize(need, [0; 4]);
+    }
+    let mut k = 0;
+    for (j, &[p, q]) in listed.iter().enumerate() {
+        // Records are [_, larger endpoint, opposite, order]: the listing
+        // itself, and when it was listed under lo (p < q) also its swap.
+        // Both slots are written without a branch (the kinds alternate
+        // unpredictably); a mid listing's second slot is overwritten by the
+        // next record. `order` is the triangle, or without TRI the
+        // listing's rank, which follows triangle order just the same.
+        let order = if TRI { tri[from + j] } else { j as u32 };
+        buf[k] = [0, p, q, order];
+        buf[k + 1] = [0, q, p, order];
+        k += 1 + usize::from(p < q);
+    }
+    // Pass 1 counted the group's records, so this holds; it is checked
+    // because the writes below are unchecked.
+    assert!(
+        out.records + k <= out.a.len(),
+        "topology: records miscounted"
+    );
+    // Writes one record, in order: its opposite vertex (and triangle) at
+    // the next record slot, and an edge slot; only the last record of each
+    // larger endpoint's run advances past that slot (no branch: it would
+    // mispredict on about every other record). The edge's range ends here,
+    // a global position in `opp`. `edges` never passes the records seen
+    // before this one, so the slot exists.
+    let mut put = |rec: &[u32; 4], run_ends: bool| {
+        // SAFETY: `records` is below the group's record count (asserted
+        // above), and those slots are the group's (`GroupOut::opp`).
+        unsafe { out.opp.add(out.records).write(rec[2]) };
+        if TRI {
+            out.tri[out.records] = MaybeUninit::new(rec[3]);
+        }
+        out.records += 1;
+        out.a[out.edges] = MaybeUninit::new(v);
+        out.b[out.edges] = MaybeUninit::new(rec[1]);
+        out.end[out.edges] = MaybeUninit::new(out.base + out.records as u32);
+        out.edges += usize::from(run_ends);
+    };
+    // By larger endpoint, then triangle: the listings are in triangle order
+    // and a triangle has one record per larger endpoint, so a stable sort
+    // by larger endpoint and the standard unstable sort on (larger,
+    // triangle) agree.
+    if k <= SMALL_RUN {
+        let order = sort_small(buf[..SMALL_RUN].try_into().unwrap(), k);
+        for j in 0..k {
+            let (key, next) = (order[j] >> 32, order[j + 1] >> 32);
+            put(&buf[order[j] as usize % SMALL_RUN], next != key);
+        }
+    } else {
+        let sorted = &mut buf[..k];
+        sorted.sort_unstable_by_key(|r| (u64::from(r[1]) << 32) | u64::from(r[3]));
+        for (i, rec) in sorted.iter().enumerate() {
+            put(rec, sorted.get(i + 1).is_none_or(|nx| nx[1] != rec[1]));
+        }
+    }
+}
+
+/// [`emit_vertex`] for a group's `vertices`, vertices with at most 8
+/// records in AVX-512 registers (94% of the dragon's), the others by
+/// [`emit_vertex`]. Same output, word for word.
+///
+/// Method, per vertex: its (at most 8) listings in one load; the larger
+/// endpoints are the listings' words as they lie ([p, q] gives p, and q
+/// where p < q), the opposite vertices the same words with each pair
+/// swapped; one compress of each by the mask of records keeps them in
+/// listing (so triangle) order. Keys `larger << 32 | rank` go through the
+/// same 8-input sorting network as [`sort_small`] (a permute, a min, a max
+/// and a blend per layer): distinct keys, so the result is the stable
+/// order. The ranks then permute the opposite vertices; an edge ends where
+/// the next larger endpoint differs, and the edges are compressed out of
+/// the records. Why: the scalar version spends its time moving records
+/// through memory and on the network's 19 dependent compare-exchanges.
+///
+/// # Safety
+/// The CPU must have AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,popcnt")]
+unsafe fn emit_range_avx512(
+    out: &mut GroupOut,
+    listings: &Listings,
+    vertices: std::ops::Range<usize>,
+    buf: &mut Vec<[u32; 4]>,
+) {
+    use std::arch::x86_64::*;
+    // The network's layers: each lane's partner, and the lanes that take
+    // the larger key.
+    const LAYERS: [([i64; 8], u8); 6] = {
+        const PAIRS: [&[(usize, usize)]; 6] = [
+            &[(0, 2), (1, 3), (4, 6), (5, 7)],
+            &[(0, 4), (1, 5), (2, 6), (3, 7)],
+            &[(0, 1), (2, 3), (4, 5), (6, 7)],
+            &[(2, 4), (3, 5)],
+            &[(1, 4), (3, 6)],
+            &[(1, 2), (3, 4), (5, 6)],
+        ];
+        let mut layers = [([0i64; 8], 0u8); 6];
+        let mut l = 0;
+        while l < 6 {
+            let mut i = 0;
+            while i < 8 {
+                layers[l].0[i] = i as i64;
+                i += 1;
+            }
+            let mut p = 0;
+            while p < PAIRS[l].len() {
+                let (lo, hi) = PAIRS[l][p];
+                layers[l].0[lo] = hi as i64;
+                layers[l].0[hi] = lo as i64;
+                layers[l].1 |= 1 << hi;
+                p += 1;
+            }
+            l += 1;
+        }
+        layers
+    };
+    // SAFETY: each row is 8 i64.
+    let partners = LAYERS.map(|(p, upper)| (unsafe { _mm512_loadu_epi64(p.as_ptr()) }, upper));
+    let rank64 = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
+    let rank32 = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0);
+    let none = _mm512_set1_epi64(-1);
+    for v in vertices {
+        let (from, to) = (listings.start[v] as usize, listings.start[v + 1] as usize);
+        let l = to - from;
+        if l <= 8 {
+            // SAFETY: the lanes loaded are listings `from..to` (the mask
+            // keeps the others from being read), not yet written over.
+            let x = unsafe {
+                _mm512_maskz_loadu_epi64(((1u32 << l) - 1) as u8, listings.at.add(from).cast())
+            };
+            let swapped = _mm512_ror_epi64::<32>(x);
+            // Word 2j is listing j's p (always a record's larger endpoint),
+            // word 2j + 1 its q (a record's where p < q).
+            let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555;
+            let records = (0x5555 & ((1u32 << (2 * l)) - 1) as u16) | (lower << 1);
+            let k = records.count_ones() as usize;
+            if k <= 8 {
+                assert!(
+                    out.records + k <= out.a.len(),
+                    "topology: records miscounted"
+                );
+                let larger = _mm512_maskz_compress_epi32(records, x);
+                let opposite = _mm512_maskz_compress_epi32(records, swapped);
+                let keys = _mm512_or_si512(
+                    _mm512_slli_epi64::<32>(_mm512_cvtepu32_epi64(_mm512_castsi512_si256(larger))),
+                    rank64,
+                );
+                let kmask = ((1u32 << k) - 1) as u8;
+                let mut s = _mm512_mask_blend_epi64(kmask, none, keys);
+                for &(partner, upper) in &partners {
+                    let p = _mm512_permutexvar_epi64(partner, s);
+                    s = _mm512_mask_blend_epi64(
+                        upper,
+                        _mm512_min_epu64(s, p),
+                        _mm512_max_epu64(s, p),
+                    );
+                }
+                let rank = _mm512_cvtepi64_epi32(s);
+                let larger = _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(s));
+                let opposite = _mm256_permutevar8x32_epi32(_mm512_castsi512_si256(opposite), rank);
+                // Past the last record the key is all ones, which no
+                // vertex id reaches.
+                let next = _mm256_alignr_epi32::<1>(_mm512_castsi512_si256(none), larger);
+                let ends = _mm256_mask_cmpneq_epu32_mask(kmask, larger, next);
+                let edges = ends.count_ones() as usize;
+                let emask = ((1u32 << edges) - 1) as u8;
+                let end = _mm256_add_epi32(
+                    rank32,
+                    _mm256_set1_epi32((out.base + out.records as u32 + 1) as i32),
+                );
+                // SAFETY: records `records..records + k` are the group's
+                // (asserted above), and edges never outnumber records.
+                unsafe {
+                    _mm256_mask_storeu_epi32(out.opp.add(out.records).cast(), kmask, opposite);
+                    let (a, b, e) = (
+                        out.a.as_mut_ptr().add(out.edges),
+                        out.b.as_mut_ptr().add(out.edges),
+                        out.end.as_mut_ptr().add(out.edges),
+                    );
+                    _mm256_mask_storeu_epi32(a.cast(), emask, _mm256_set1_epi32(v as i32));
+                    _mm256_mask_storeu_epi32(
+                        b.cast(),
+                        emask,
+                        _mm256_maskz_compress_epi32(ends, larger),
+                    );
+                    _mm256_mask_storeu_epi32(
+                        e.cast(),
+                        emask,
+                        _mm256_maskz_compress_epi32(ends, end),
+                    );
+                }
+                out.records += k;
+                out.edges += edges;
+                continue;
+            }
+        }
+        // SAFETY: as in `emit_group`.
+        let (from, listed) = unsafe { listings.of(v) };
+        emit_vertex::<false>(out, v as u32, from, listed, listings.tri, buf);
+    }
 }
 
 /// A triangle's corners in increasing id order (no repeated ids): the
@@ -802,15 +1065,17 @@ mod tests {
         };
         for chunks in 1..=5 {
             same_edges(
-                &build_edges_in::<true>(&tris, vertices, chunks).0,
+                &build_edges_in::<true>(&tris, vertices, chunks, false).0,
                 &expected,
                 &format!("{chunks} chunks"),
             );
-            same_edges(
-                &build_edges_in::<false>(&tris, vertices, chunks).0,
-                &without_tri,
-                &format!("{chunks} chunks, opposites only"),
-            );
+            for simd in [false, simd_available()] {
+                same_edges(
+                    &build_edges_in::<false>(&tris, vertices, chunks, simd).0,
+                    &without_tri,
+                    &format!("{chunks} chunks, opposites only, simd {simd}"),
+                );
+            }
         }
         // The public entry point cuts chunks and groups by thread count.
         for threads in 1..=4 {
@@ -834,7 +1099,7 @@ mod tests {
         );
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>(&tris[..3], vertices, 4).0,
+            build_edges_in::<true>(&tris[..3], vertices, 4, false).0,
             naive(&tris[..3])
         );
     }
