@@ -92,9 +92,11 @@ impl Edges {
 ///    its triangles straight to their final place, and its edges one after
 ///    the other from the group's first record's offset (edges never
 ///    outnumber records). Where the CPU has AVX-512, a vertex with at most
-///    8 records is done in registers (`emit_range_avx512`): 13.7–14.1 →
-///    9.1–9.3 ms on the dragon, one thread (`cargo run --release --example
-///    stage_probe -- passes`, the two versions alternated).
+///    8 listings (so at most 16 records) is done in registers
+///    (`emit_range_avx512`): 14.5–15.0 → 7.1–7.6 ms on the dragon, one
+///    thread (`cargo run --release --example stage_probe -- passes`, the
+///    two versions alternated; 9.1–9.3 ms with the kernel for up to 8
+///    records only).
 /// 4. **Compact**: each group's opposite vertices and edges are moved down
 ///    after the previous groups' (one move per group and array), and the
 ///    listings' memory becomes `opp`.
@@ -649,21 +651,24 @@ fn emit_vertex<const TRI: bool>(
     }
 }
 
-/// [`emit_vertex`] for a group's `vertices`, vertices with at most 8
-/// records in AVX-512 registers (94% of the dragon's), the others by
-/// [`emit_vertex`]. Same output, word for word.
+/// [`emit_vertex`] for a group's `vertices`: vertices with at most 8
+/// listings in AVX-512 registers (all but 84 of the dragon's 435,545), the
+/// others by [`emit_vertex`]. Same output, word for word.
 ///
-/// Method, per vertex: its (at most 8) listings in one load; the larger
-/// endpoints are the listings' words as they lie ([p, q] gives p, and q
-/// where p < q), the opposite vertices the same words with each pair
-/// swapped; one compress of each by the mask of records keeps them in
-/// listing (so triangle) order. Keys `larger << 32 | rank` go through the
-/// same 8-input sorting network as [`sort_small`] (a permute, a min, a max
-/// and a blend per layer): distinct keys, so the result is the stable
-/// order. The ranks then permute the opposite vertices; an edge ends where
-/// the next larger endpoint differs, and the edges are compressed out of
-/// the records. Why: the scalar version spends its time moving records
-/// through memory and on the network's 19 dependent compare-exchanges.
+/// Method, per vertex: its listings in one load; the larger endpoints are
+/// the listings' words as they lie ([p, q] gives p, and q where p < q), the
+/// opposite vertices the same words with each pair swapped; one compress of
+/// each by the mask of records keeps them in listing (so triangle) order.
+/// Keys `larger << 32 | rank` go through the same 8-input sorting network
+/// as [`sort_small`] (a permute, a min, a max and a blend per layer), or
+/// with 9 to 16 records (5.7% of the dragon's vertices, 10% of its
+/// records) through it in two registers and a bitonic merge: distinct
+/// keys, so the result is the stable order. The ranks then permute the
+/// opposite vertices; an edge ends where the next larger endpoint differs,
+/// and the edges are compressed out of the records. Why: the scalar
+/// version spends its time moving records through memory, on the
+/// network's 19 dependent compare-exchanges, and above 8 records on the
+/// standard sort's mispredicted branches.
 ///
 /// # Safety
 /// The CPU must have AVX-512F and AVX-512VL.
@@ -710,8 +715,33 @@ unsafe fn emit_range_avx512(
     // SAFETY: each row is 8 i64.
     let partners = LAYERS.map(|(p, upper)| (unsafe { _mm512_loadu_epi64(p.as_ptr()) }, upper));
     let rank64 = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
-    let rank32 = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0);
+    let rank32 = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+    let reverse = _mm512_set_epi64(0, 1, 2, 3, 4, 5, 6, 7);
     let none = _mm512_set1_epi64(-1);
+    // One layer of compare-exchanges: lane i against lane `partner[i]`,
+    // the lanes in `upper` keeping the larger key.
+    let layer = |s: __m512i, partner: __m512i, upper: u8| {
+        let p = _mm512_permutexvar_epi64(partner, s);
+        _mm512_mask_blend_epi64(upper, _mm512_min_epu64(s, p), _mm512_max_epu64(s, p))
+    };
+    let sort8 = |mut s: __m512i| {
+        for &(partner, upper) in &partners {
+            s = layer(s, partner, upper);
+        }
+        s
+    };
+    // Half-cleaners at distances 4, 2 and 1: sorts a bitonic sequence.
+    let cleaners = [
+        (_mm512_set_epi64(3, 2, 1, 0, 7, 6, 5, 4), 0xF0u8),
+        (_mm512_set_epi64(5, 4, 7, 6, 1, 0, 3, 2), 0xCC),
+        (_mm512_set_epi64(6, 7, 4, 5, 2, 3, 0, 1), 0xAA),
+    ];
+    let merge8 = |mut s: __m512i| {
+        for &(partner, upper) in &cleaners {
+            s = layer(s, partner, upper);
+        }
+        s
+    };
     for v in vertices {
         let (from, to) = (listings.start[v] as usize, listings.start[v + 1] as usize);
         let l = to - from;
@@ -727,65 +757,79 @@ unsafe fn emit_range_avx512(
             let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555;
             let records = (0x5555 & ((1u32 << (2 * l)) - 1) as u16) | (lower << 1);
             let k = records.count_ones() as usize;
-            if k <= 8 {
-                assert!(
-                    out.records + k <= out.a.len(),
-                    "topology: records miscounted"
+            assert!(
+                out.records + k <= out.a.len(),
+                "topology: records miscounted"
+            );
+            let larger = _mm512_maskz_compress_epi32(records, x);
+            let opposite = _mm512_maskz_compress_epi32(records, swapped);
+            let kmask = ((1u32 << k) - 1) as u16;
+            // Keys of 8 records (a half of `larger`) ranked from `ranks`,
+            // all ones past the last record.
+            let keys = |half: __m256i, ranks: __m512i, valid: u8| {
+                let wide = _mm512_slli_epi64::<32>(_mm512_cvtepu32_epi64(half));
+                _mm512_mask_blend_epi64(valid, none, _mm512_or_si512(wide, ranks))
+            };
+            let first = keys(_mm512_castsi512_si256(larger), rank64, kmask as u8);
+            let (lo, hi) = if k <= 8 {
+                (sort8(first), none)
+            } else {
+                let second = keys(
+                    _mm512_extracti64x4_epi64::<1>(larger),
+                    _mm512_add_epi64(rank64, _mm512_set1_epi64(8)),
+                    (kmask >> 8) as u8,
                 );
-                let larger = _mm512_maskz_compress_epi32(records, x);
-                let opposite = _mm512_maskz_compress_epi32(records, swapped);
-                let keys = _mm512_or_si512(
-                    _mm512_slli_epi64::<32>(_mm512_cvtepu32_epi64(_mm512_castsi512_si256(larger))),
-                    rank64,
+                // Two sorted halves, then a bitonic merge: the first half
+                // against the second reversed gives the 8 smallest and the
+                // 8 largest keys, each a bitonic sequence, which three
+                // half-cleaners sort.
+                let (a, b) = (sort8(first), sort8(second));
+                let b = _mm512_permutexvar_epi64(reverse, b);
+                (
+                    merge8(_mm512_min_epu64(a, b)),
+                    merge8(_mm512_max_epu64(a, b)),
+                )
+            };
+            // The sorted keys as 16 larger endpoints and 16 ranks.
+            let join = |a: __m512i, b: __m512i| {
+                _mm512_inserti64x4::<1>(
+                    _mm512_castsi256_si512(_mm512_cvtepi64_epi32(a)),
+                    _mm512_cvtepi64_epi32(b),
+                )
+            };
+            let larger = join(_mm512_srli_epi64::<32>(lo), _mm512_srli_epi64::<32>(hi));
+            let rank = join(lo, hi);
+            let opposite = _mm512_permutexvar_epi32(rank, opposite);
+            // Past the last record the key is all ones, which no vertex id
+            // reaches.
+            let next = _mm512_alignr_epi32::<1>(none, larger);
+            let ends = _mm512_mask_cmpneq_epu32_mask(kmask, larger, next);
+            let edges = ends.count_ones() as usize;
+            let emask = ((1u32 << edges) - 1) as u16;
+            let end = _mm512_add_epi32(
+                rank32,
+                _mm512_set1_epi32((out.base + out.records as u32 + 1) as i32),
+            );
+            // SAFETY: records `records..records + k` are the group's
+            // (asserted above), and edges never outnumber records.
+            unsafe {
+                _mm512_mask_storeu_epi32(out.opp.add(out.records).cast(), kmask, opposite);
+                let (a, b, e) = (
+                    out.a.as_mut_ptr().add(out.edges),
+                    out.b.as_mut_ptr().add(out.edges),
+                    out.end.as_mut_ptr().add(out.edges),
                 );
-                let kmask = ((1u32 << k) - 1) as u8;
-                let mut s = _mm512_mask_blend_epi64(kmask, none, keys);
-                for &(partner, upper) in &partners {
-                    let p = _mm512_permutexvar_epi64(partner, s);
-                    s = _mm512_mask_blend_epi64(
-                        upper,
-                        _mm512_min_epu64(s, p),
-                        _mm512_max_epu64(s, p),
-                    );
-                }
-                let rank = _mm512_cvtepi64_epi32(s);
-                let larger = _mm512_cvtepi64_epi32(_mm512_srli_epi64::<32>(s));
-                let opposite = _mm256_permutevar8x32_epi32(_mm512_castsi512_si256(opposite), rank);
-                // Past the last record the key is all ones, which no
-                // vertex id reaches.
-                let next = _mm256_alignr_epi32::<1>(_mm512_castsi512_si256(none), larger);
-                let ends = _mm256_mask_cmpneq_epu32_mask(kmask, larger, next);
-                let edges = ends.count_ones() as usize;
-                let emask = ((1u32 << edges) - 1) as u8;
-                let end = _mm256_add_epi32(
-                    rank32,
-                    _mm256_set1_epi32((out.base + out.records as u32 + 1) as i32),
+                _mm512_mask_storeu_epi32(a.cast(), emask, _mm512_set1_epi32(v as i32));
+                _mm512_mask_storeu_epi32(
+                    b.cast(),
+                    emask,
+                    _mm512_maskz_compress_epi32(ends, larger),
                 );
-                // SAFETY: records `records..records + k` are the group's
-                // (asserted above), and edges never outnumber records.
-                unsafe {
-                    _mm256_mask_storeu_epi32(out.opp.add(out.records).cast(), kmask, opposite);
-                    let (a, b, e) = (
-                        out.a.as_mut_ptr().add(out.edges),
-                        out.b.as_mut_ptr().add(out.edges),
-                        out.end.as_mut_ptr().add(out.edges),
-                    );
-                    _mm256_mask_storeu_epi32(a.cast(), emask, _mm256_set1_epi32(v as i32));
-                    _mm256_mask_storeu_epi32(
-                        b.cast(),
-                        emask,
-                        _mm256_maskz_compress_epi32(ends, larger),
-                    );
-                    _mm256_mask_storeu_epi32(
-                        e.cast(),
-                        emask,
-                        _mm256_maskz_compress_epi32(ends, end),
-                    );
-                }
-                out.records += k;
-                out.edges += edges;
-                continue;
+                _mm512_mask_storeu_epi32(e.cast(), emask, _mm512_maskz_compress_epi32(ends, end));
             }
+            out.records += k;
+            out.edges += edges;
+            continue;
         }
         // SAFETY: as in `emit_group`.
         let (from, listed) = unsafe { listings.of(v) };
@@ -1057,6 +1101,29 @@ mod tests {
         for i in 0..100u32 {
             tris.extend_from_slice(&[RANGE as u32, RANGE as u32 + 1 + i % 50, 5 + i]);
             tris.extend_from_slice(&[7 + i % 9, RANGE as u32 - 1, 2 * RANGE as u32 + i]);
+        }
+        // The AVX-512 kernel's cases all occur (by listings and records per
+        // vertex): at most 8 records (class 1), 9 to 16 (two registers,
+        // class 2), and more than 8 listings (the scalar path, class 3).
+        let mut per_vertex = vec![(0u32, 0u32); vertices];
+        for t in tris.chunks_exact(3) {
+            let (lo, mid, _) = sort3(t);
+            per_vertex[lo as usize].0 += 1;
+            per_vertex[lo as usize].1 += 2;
+            per_vertex[mid as usize].0 += 1;
+            per_vertex[mid as usize].1 += 1;
+        }
+        let class = |&(l, k): &(u32, u32)| match (l, k) {
+            (0, _) => 0,
+            (..=8, ..=8) => 1,
+            (..=8, _) => 2,
+            _ => 3,
+        };
+        for c in 1..=3 {
+            assert!(
+                per_vertex.iter().any(|v| class(v) == c),
+                "no vertex of class {c}"
+            );
         }
         let expected = naive(&tris);
         let without_tri = Edges {
