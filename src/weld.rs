@@ -7,6 +7,8 @@
 //! integers. It also makes the welded vertex numbering independent of how the
 //! input happened to order its vertices.
 
+use std::mem::MaybeUninit;
+
 /// Result of [`weld`].
 #[derive(Debug, Clone, Default)]
 pub struct Welded {
@@ -249,7 +251,10 @@ const MAX_BUCKETS: usize = 1 << 12;
 /// so sorting within buckets sorts the whole. Each word is written once,
 /// straight into its bucket, and each bucket (about a hundred words) is then
 /// sorted in cache.
-fn sort_vertices<'w>(positions: &[[f32; 3]], words: &'w mut [u128]) -> Vec<(&'w [u128], usize)> {
+fn sort_vertices<'w>(
+    positions: &[[f32; 3]],
+    words: &'w mut [MaybeUninit<u128>],
+) -> Vec<(&'w [u128], usize)> {
     use rayon::prelude::*;
     let n = positions.len();
     debug_assert_eq!(words.len(), n);
@@ -344,12 +349,15 @@ fn sort_vertices<'w>(positions: &[[f32; 3]], words: &'w mut [u128]) -> Vec<(&'w 
         for (i, (&p, &b)) in positions.iter().zip(&ids).enumerate() {
             // Out-of-part buckets wrap around to past the end.
             if let Some(c) = next.get_mut((b as usize).wrapping_sub(first)) {
-                out[*c as usize] = vertex_word(p, i);
+                out[*c as usize] = MaybeUninit::new(vertex_word(p, i));
                 *c += 1;
             }
         }
     });
     drop(ids);
+    // SAFETY: the bucket sizes add up to n, and every bucket got exactly its
+    // size of words (each vertex is in one bucket, and its part wrote it).
+    let words = unsafe { assume_init_mut(words) };
 
     // Each bucket sorted on its own, in parallel.
     let mut groups = Vec::with_capacity(buckets);
@@ -374,11 +382,30 @@ fn sort_vertices<'w>(positions: &[[f32; 3]], words: &'w mut [u128]) -> Vec<(&'w 
         .collect()
 }
 
+/// `w`, every element of which is written, as initialised.
+///
+/// # Safety
+/// Every element of `w` must have been written.
+unsafe fn assume_init_mut<T>(w: &mut [MaybeUninit<T>]) -> &mut [T] {
+    // SAFETY: `MaybeUninit<T>` has `T`'s layout, and the caller has written
+    // every element.
+    unsafe { std::slice::from_raw_parts_mut(w.as_mut_ptr().cast(), w.len()) }
+}
+
+/// A pointer to slots that parallel jobs write, each to its own slots.
+struct SharedSlots<T>(*mut T);
+// SAFETY: shared only to write disjoint slots (see its uses).
+unsafe impl<T> Sync for SharedSlots<T> {}
+
 /// Triangles per parallel block of the degenerate filter.
 const TRI_BLOCK: usize = 1 << 14;
 
 /// Set in `run[v]` once a kept triangle uses vertex v; run ids stay below.
 const USED: u32 = 1 << 31;
+
+/// What debug builds fill the uninitialised run ids and triangles with, to
+/// check that every slot is written: run ids stay below [`USED`].
+const UNWRITTEN: u32 = u32::MAX;
 
 /// Welds the soup `positions`/`indices` (3 indices per triangle, all in range,
 /// all positions used by a triangle finite, fewer than 2^31 distinct
@@ -418,18 +445,32 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
     // have about two triangles a vertex): the first touch of fresh memory
     // (the kernel mapping and zeroing pages) costs about as much as the
     // writes, so one buffer for both saves a buffer's worth.
-    let mut triangles = vec![0u32; 3 * triangle_count];
-    let mut own_words = Vec::new();
-    let words: &mut [u128] = match triangles
-        .get_mut(..4 * n)
-        .and_then(|t| bytemuck::try_cast_slice_mut(t).ok())
-    {
-        Some(w) => w,
-        None => {
-            own_words = vec![0u128; n];
-            &mut own_words
-        }
-    };
+    //
+    // Both uninitialised: every word and every triangle slot is written
+    // before it is read, and zeroing them was a memset of the whole buffer
+    // whenever the allocator reused a freed block for it, as for a batch's
+    // later inputs (the dragon's weld with memory recycled: 15.0–16.4 →
+    // 14.2–14.9 ms, `stage_probe -- weld`, 5 alternated runs).
+    let mut triangles: Vec<u32> = Vec::with_capacity(3 * triangle_count);
+    // Debug builds fill them with a value no vertex id reaches, and check
+    // after step 3 that none is left.
+    if cfg!(debug_assertions) {
+        triangles
+            .spare_capacity_mut()
+            .fill(MaybeUninit::new(UNWRITTEN));
+    }
+    let mut own_words: Vec<u128> = Vec::new();
+    let spare = triangles.spare_capacity_mut().get_mut(..4 * n);
+    // SAFETY: any bytes are a `MaybeUninit<u128>`, and `align_to_mut` only
+    // puts whole, aligned ones in the middle.
+    let words: &mut [MaybeUninit<u128>] =
+        match spare.map(|t| unsafe { t.align_to_mut::<MaybeUninit<u128>>() }) {
+            Some(([], w, [])) => w,
+            _ => {
+                own_words.reserve_exact(n);
+                &mut own_words.spare_capacity_mut()[..n]
+            }
+        };
 
     // 1. Sort all input vertices by position.
     let groups = sort_vertices(positions, words);
@@ -443,10 +484,18 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
         runs < USED as usize,
         "weld: 2^31 distinct positions or more"
     );
-    let run: Vec<AtomicU32> = (0..n).into_par_iter().map(|_| AtomicU32::new(0)).collect();
-    let mut out_positions = vec![[0.0f32; 3]; runs];
+    // Both uninitialised, for the same reason as the triangles: each run
+    // writes its position, and each input vertex is in one word.
+    let mut run: Vec<AtomicU32> = Vec::with_capacity(n);
+    if cfg!(debug_assertions) {
+        for r in run.spare_capacity_mut() {
+            r.write(AtomicU32::new(UNWRITTEN));
+        }
+    }
+    let run_at = SharedSlots(run.as_mut_ptr());
+    let mut out_positions: Vec<[f32; 3]> = Vec::with_capacity(runs);
     let mut jobs = Vec::with_capacity(groups.len());
-    let mut rest = out_positions.as_mut_slice();
+    let mut rest = &mut out_positions.spare_capacity_mut()[..runs];
     let mut first_run = 0;
     for &(words, distinct) in &groups {
         let (head, tail) = rest.split_at_mut(distinct);
@@ -460,17 +509,33 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
             // Branch-free: every word writes its run's position (the same
             // value for every word of a run), and the run id steps when the
             // key changes.
+            let run_at = &run_at;
             let mut r = usize::MAX;
             let mut prev_key = words.first().map_or(0, |&w| !key(w));
             for &w in words {
                 r = r.wrapping_add((key(w) != prev_key) as usize);
                 prev_key = key(w);
-                out[r] = word_position(w);
-                run[w as u32 as usize].store(first_run + r as u32, Relaxed);
+                out[r] = MaybeUninit::new(word_position(w));
+                // SAFETY: the word's vertex index is below n, and no other
+                // word has it (one word per input vertex), so no other job
+                // writes this slot.
+                unsafe {
+                    run_at
+                        .0
+                        .add(w as u32 as usize)
+                        .write(AtomicU32::new(first_run + r as u32))
+                };
             }
         });
     drop(groups);
     drop(own_words);
+    // SAFETY: every run's position and every vertex's run were written
+    // just above (the groups' distinct keys add up to `runs`).
+    unsafe {
+        out_positions.set_len(runs);
+        run.set_len(n);
+    }
+    debug_assert!(run.iter().all(|r| r.load(Relaxed) != UNWRITTEN));
 
     // 3. Triangles in run ids, in place, in fixed blocks in parallel; the
     //    degenerate ones are listed (they are rare) and closed up after.
@@ -479,7 +544,7 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
     //    is the same in any order.
     let dropped: Vec<Vec<u32>> = indices
         .par_chunks(3 * TRI_BLOCK)
-        .zip(triangles.par_chunks_mut(3 * TRI_BLOCK))
+        .zip(triangles.spare_capacity_mut()[..3 * triangle_count].par_chunks_mut(3 * TRI_BLOCK))
         .enumerate()
         .map(|(blk, (block, out))| {
             let mut dropped = Vec::new();
@@ -494,7 +559,7 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
                     run[c[2] as usize].load(Relaxed),
                 ];
                 let (a, b, d) = (r[0] & !USED, r[1] & !USED, r[2] & !USED);
-                o.copy_from_slice(&[a, b, d]);
+                o.copy_from_slice(&[a, b, d].map(MaybeUninit::new));
                 if a != b && b != d && a != d {
                     for (&v, &r) in c.iter().zip(&r) {
                         run[v as usize].store(r | USED, Relaxed);
@@ -506,6 +571,9 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
             dropped
         })
         .collect();
+    // SAFETY: the blocks wrote all 3 · triangle_count slots.
+    unsafe { triangles.set_len(3 * triangle_count) };
+    debug_assert!(!triangles.contains(&UNWRITTEN));
     let dropped = dropped.concat();
     let degenerate = dropped.len() as u64;
     let source_triangle: Vec<u32> = if dropped.is_empty() {
@@ -750,13 +818,15 @@ mod tests {
                 .collect();
             expect.sort_unstable();
             for threads in [1, 2, 3] {
-                let mut words = vec![0u128; pos.len()];
+                let mut words = vec![MaybeUninit::new(0u128); pos.len()];
                 let groups = with_threads(threads, || {
                     sort_vertices(&pos, &mut words)
                         .into_iter()
                         .map(|(g, distinct)| (g.len(), distinct))
                         .collect::<Vec<_>>()
                 });
+                // SAFETY: initialised above (and written by the sort).
+                let words: Vec<u128> = words.iter().map(|w| unsafe { w.assume_init() }).collect();
                 // Sorted by key, and the same words.
                 assert!(words.windows(2).all(|w| key(w[0]) <= key(w[1])));
                 let mut all = words.clone();
