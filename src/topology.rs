@@ -583,13 +583,10 @@ fn emit_range<const TRI: bool>(
     vertices: std::ops::Range<usize>,
     buf: &mut Vec<[u32; 4]>,
 ) -> (usize, usize) {
-    let (start, at) = (listings.start, listings.at);
     for v in vertices {
-        let (from, to) = (start[v] as usize, start[v + 1] as usize);
-        // SAFETY: pass 2 wrote listings `from..to`; vertices are emitted in
-        // order, and a vertex's records only reach listings already read
-        // (see where `e` is made).
-        let listed = unsafe { std::slice::from_raw_parts(at.add(from), to - from) };
+        // SAFETY: vertices are emitted in order, and a vertex's records only
+        // reach listings already read (see where `e` is made).
+        let (from, listed) = unsafe { listings.of(v) };
         emit_vertex::<TRI>(&mut out, v as u32, from, listed, listings.tri, buf);
     }
     (out.records, out.edges)
@@ -869,7 +866,7 @@ unsafe fn emit_range_avx512(
             out.edges += edges;
             continue;
         }
-        // SAFETY: as in `emit_group`.
+        // SAFETY: as in `emit_range`.
         let (from, listed) = unsafe { listings.of(v) };
         emit_vertex::<false>(&mut out, v as u32, from, listed, listings.tri, buf);
     }
