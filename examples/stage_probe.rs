@@ -20,6 +20,13 @@
 //! itself no longer makes. The exception is `passes`
 //! (`topology::build_edges_opposites_only_timed`, eleventh round): delete
 //! `passes` to build the file at an earlier commit.
+//!
+//! Two environment variables, for every step: `RECYCLE=1` holds an
+//! `alloc::KeepFreed` guard, so that each run reuses the blocks the one
+//! before freed instead of faulting in fresh pages, whose cost on this
+//! machine varies more than the code's; `NO_AVX512=1` turns the crate's
+//! AVX-512 kernels off (`evaluate_simd::disable_avx512`), which times the
+//! scalar topology pass on the same binary.
 
 use std::path::Path;
 use std::time::Instant;
@@ -47,6 +54,10 @@ fn main() {
         std::process::exit(1);
     };
     let path = Path::new(file);
+    let _keep = std::env::var_os("RECYCLE").map(|_| svpack::alloc::KeepFreed::new());
+    if std::env::var_os("NO_AVX512").is_some() {
+        svpack::evaluate_simd::disable_avx512(true);
+    }
     if std::env::var_os("RAYON_NUM_THREADS").is_none() {
         rayon::ThreadPoolBuilder::new()
             .num_threads(1)
@@ -68,9 +79,9 @@ fn main() {
 }
 
 /// The weld as a build of a batch's later inputs runs it: 60 times under
-/// an `alloc::KeepFreed` guard, so that each run gets the blocks the
-/// previous one freed (the thirteenth round's uninitialised buffers skip
-/// the zeroing such a block otherwise gets).
+/// an `alloc::KeepFreed` guard (whatever `RECYCLE` says), so that each run
+/// gets the blocks the previous one freed (the thirteenth round's
+/// uninitialised buffers skip the zeroing such a block otherwise gets).
 fn weld_recycled(path: &Path) {
     let _keep = svpack::alloc::KeepFreed::new();
     let soup = svpack::load::load(path).unwrap();

@@ -575,7 +575,8 @@ fn emit_group<const TRI: bool>(
 ///
 /// A function of its own, as the kernel is, not inlined into the job:
 /// sharing the job's code with the call to the kernel, the loop took 7%
-/// longer on the dragon (13.4–14.0 against 14.4–15.1 ms, memory recycled).
+/// longer on the dragon (13.4–14.0 against 14.4–15.1 ms, `RECYCLE=1
+/// NO_AVX512=1 cargo run --release --example stage_probe -- passes`).
 #[inline(never)]
 fn emit_range<const TRI: bool>(
     mut out: GroupOut,
