@@ -720,14 +720,7 @@ unsafe fn emit_range_avx512(
     // The network's layers: each lane's partner, and the lanes that take
     // the larger key.
     const LAYERS: [([i64; 8], u8); 6] = {
-        const PAIRS: [&[(usize, usize)]; 6] = [
-            &[(0, 2), (1, 3), (4, 6), (5, 7)],
-            &[(0, 4), (1, 5), (2, 6), (3, 7)],
-            &[(0, 1), (2, 3), (4, 5), (6, 7)],
-            &[(2, 4), (3, 5)],
-            &[(1, 4), (3, 6)],
-            &[(1, 2), (3, 4), (5, 6)],
-        ];
+        const PAIRS: [&[(usize, usize)]; 6] = NETWORK8;
         let mut layers = [([0i64; 8], 0u8); 6];
         let mut l = 0;
         while l < 6 {
@@ -928,21 +921,25 @@ fn sort_small(src: &[[u32; 4]; SMALL_RUN], m: usize) -> [u64; SMALL_RUN + 1] {
         k[a] = x.min(y);
         k[b] = x.max(y);
     };
-    // An optimal network for 8 inputs (depth 6), layer by layer.
-    for (a, b) in [(0, 2), (1, 3), (4, 6), (5, 7)] {
-        ce(a, b);
-    }
-    for (a, b) in [(0, 4), (1, 5), (2, 6), (3, 7)] {
-        ce(a, b);
-    }
-    for (a, b) in [(0, 1), (2, 3), (4, 5), (6, 7)] {
-        ce(a, b);
-    }
-    for (a, b) in [(2, 4), (3, 5), (1, 4), (3, 6), (1, 2), (3, 4), (5, 6)] {
-        ce(a, b);
+    for layer in NETWORK8 {
+        for &(a, b) in layer {
+            ce(a, b);
+        }
     }
     k
 }
+
+/// An optimal sorting network for 8 inputs (19 compare-exchanges, depth 6),
+/// layer by layer: the pairs of a layer are disjoint. [`sort_small`] runs
+/// it on scalars, `emit_range_avx512` a layer at a time in one register.
+const NETWORK8: [&[(usize, usize)]; 6] = [
+    &[(0, 2), (1, 3), (4, 6), (5, 7)],
+    &[(0, 4), (1, 5), (2, 6), (3, 7)],
+    &[(0, 1), (2, 3), (4, 5), (6, 7)],
+    &[(2, 4), (3, 5)],
+    &[(1, 4), (3, 6)],
+    &[(1, 2), (3, 4), (5, 6)],
+];
 
 /// log2 of the vertices per range of pass 3 of [`build_edges`]: enough
 /// ranges for the threads to share, few enough that the per-range counts of
