@@ -53,6 +53,42 @@ use std::alloc::{GlobalAlloc, Layout, System};
 /// one huge page (2 MiB on x86-64) is the smallest range the hint can help.
 pub const HUGE_MIN: usize = 2 << 20;
 
+/// Smallest buffer that [`large_capacity`] rounds up to [`HUGE_MIN`] bytes.
+pub const ROUND_UP_FROM: usize = HUGE_MIN / 4;
+
+/// The capacity to reserve for a buffer of `n` elements of `T` that a build
+/// makes per vertex or per triangle: `n`, or, when `n` elements take from
+/// [`ROUND_UP_FROM`] up to [`HUGE_MIN`] bytes, as many as fill `HUGE_MIN`
+/// bytes, so that [`HugePageAlloc`] gives it a large block (a kept one, or
+/// huge pages) instead of malloc's 4 KiB pages.
+///
+/// Why: a fresh 4 KiB page costs 1.4 µs here, 0.35 ms per MiB, against
+/// 0.12 ms per MiB for huge pages and nothing for a kept block
+/// (`examples/first_touch.rs`); the weld's run ids and bucket numbers and
+/// the topology's counts (1.75, 0.87 and 1.75 MB on the dragon) were
+/// 4.0 MiB of fresh 4 KiB pages with one thread, 5.5 with two
+/// (`benches/fresh_pages.py`). Why not a lower [`HUGE_MIN`] for all
+/// blocks (tried in the eleventh round): the OBJ parser's many blocks of
+/// 1–2 MiB then each took a huge page, and an OBJ build's peak memory grew
+/// from 70 to 87 MiB. Only the buffers that ask get the rounding.
+pub fn large_capacity<T>(n: usize) -> usize {
+    let size = std::mem::size_of::<T>();
+    let bytes = n.saturating_mul(size);
+    if size > 0 && (ROUND_UP_FROM..HUGE_MIN).contains(&bytes) {
+        HUGE_MIN.div_ceil(size)
+    } else {
+        n
+    }
+}
+
+/// `n` zeroed elements, in a buffer of [`large_capacity`]`(n)` (fresh
+/// mappings are zero already; a kept block is zeroed by `memset`).
+pub fn zeroed_large<T: bytemuck::Zeroable>(n: usize) -> Vec<T> {
+    let mut v = bytemuck::zeroed_vec(large_capacity::<T>(n));
+    v.truncate(n);
+    v
+}
+
 /// Large blocks' alignment limit: `mmap` returns page-aligned memory.
 const PAGE: usize = 4096;
 
@@ -569,5 +605,26 @@ mod tests {
             std::slice::from_raw_parts_mut(w, big)[big - 1] = 5;
             a.dealloc(w, Layout::from_size_align(big, 8).unwrap());
         }
+    }
+
+    /// Buffers from a quarter of a huge page up to one are rounded up to a
+    /// whole one, others keep their length; `zeroed_large` gives `n` zeros
+    /// in the rounded buffer. Caught: rounding from `HUGE_MIN` instead of
+    /// `ROUND_UP_FROM` (the dragon's 1.75 MB arrays kept their 4 KiB pages),
+    /// and a capacity in bytes instead of elements.
+    #[test]
+    fn per_vertex_buffers_round_up_to_a_huge_page() {
+        let quarter = ROUND_UP_FROM / 4;
+        assert_eq!(large_capacity::<u32>(quarter - 1), quarter - 1);
+        assert_eq!(large_capacity::<u32>(quarter), HUGE_MIN / 4);
+        assert_eq!(large_capacity::<u32>(437_646), HUGE_MIN / 4);
+        assert_eq!(large_capacity::<u16>(437_646), HUGE_MIN / 2);
+        assert_eq!(large_capacity::<u32>(HUGE_MIN / 4), HUGE_MIN / 4);
+        assert_eq!(large_capacity::<u32>(HUGE_MIN), HUGE_MIN);
+        assert_eq!(large_capacity::<[f32; 3]>(100_000), HUGE_MIN.div_ceil(12));
+        assert_eq!(large_capacity::<()>(usize::MAX), usize::MAX);
+        let v = zeroed_large::<u32>(437_646);
+        assert_eq!((v.len(), v.capacity()), (437_646, HUGE_MIN / 4));
+        assert!(v.iter().all(|&x| x == 0));
     }
 }

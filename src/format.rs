@@ -823,10 +823,22 @@ pub fn write_file_streamed_finishing(
     // Set while a thread writes (a hint: two threads may both write, and
     // the kernel then serialises them as before).
     let writing = AtomicBool::new(false);
+    // Each thread's fill buffer holds the largest unit; rounded up to a
+    // large block (`alloc::large_capacity`), since the dragon's units of
+    // 0.8–1 MB took fresh 4 KiB pages, 2 MiB of them with one thread.
+    let widest = (0..units)
+        .map(|u| (0..sections).map(|s| source.floats(u, s)).sum::<usize>())
+        .max()
+        .unwrap_or(0);
     let crcs: Vec<Vec<crc32fast::Hasher>> = (0..units)
         .into_par_iter()
         .map_init(
-            || (Vec::<f32>::new(), Vec::<u8>::new()),
+            || {
+                (
+                    Vec::<f32>::with_capacity(crate::alloc::large_capacity::<f32>(widest)),
+                    Vec::<u8>::new(),
+                )
+            },
             |(fbuf, bbuf), u| {
                 let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
                 // Not zeroed first: `fill` writes every float (which debug

@@ -202,7 +202,9 @@ fn build_edges_in<const TRI: bool>(
         .par_iter()
         .map(|tris| {
             // Vertex v's count at v + 1 (see where `start` is taken).
-            let mut counts = vec![0u32; vertex_count + 1];
+            // Rounded up to a large block (`alloc::large_capacity`): the
+            // soup's freed blocks serve it, or huge pages.
+            let mut counts = crate::alloc::zeroed_large::<u32>(vertex_count + 1);
             let c = &mut counts[1..];
             let mut rr = vec![0u32; ranges];
             for (i, t) in tris.chunks_exact(3).enumerate() {

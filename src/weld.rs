@@ -292,7 +292,8 @@ fn sort_vertices<'w>(
 
     // The bucket of every vertex (kept, so the scatter need not compute it
     // again) and the size of every bucket.
-    let mut ids = vec![0u16; n];
+    // (Rounded up to a large block: see `alloc::large_capacity`.)
+    let mut ids = crate::alloc::zeroed_large::<u16>(n);
     let sizes = positions
         .par_chunks(VERTEX_BLOCK)
         .zip(ids.par_chunks_mut(VERTEX_BLOCK))
@@ -486,7 +487,8 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
     );
     // Both uninitialised, for the same reason as the triangles: each run
     // writes its position, and each input vertex is in one word.
-    let mut run: Vec<AtomicU32> = Vec::with_capacity(n);
+    // (Rounded up to a large block: see `alloc::large_capacity`.)
+    let mut run: Vec<AtomicU32> = Vec::with_capacity(crate::alloc::large_capacity::<AtomicU32>(n));
     if cfg!(debug_assertions) {
         for r in run.spare_capacity_mut() {
             r.write(AtomicU32::new(UNWRITTEN));
