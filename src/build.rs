@@ -200,10 +200,11 @@ pub fn build_soup_timed(
     t: &mut Timings,
     stage: StageCallback<'_>,
 ) -> Built {
-    let (welded, edges, es) = weld_and_topology(soup, t, stage);
+    let (welded, edges) = weld_and_topology(soup, t, stage);
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, welded.triangle_count(), max_mult);
+    let es = plan.edge_stats();
     let layout = layout::layout_planned(&welded, &edges, &plan);
     t.layout += ms(i);
     let stats = mesh_stats(
@@ -228,14 +229,10 @@ fn ms(i: Instant) -> f64 {
 }
 
 /// Weld and topology of a checked soup, timed into `t`.
-fn weld_and_topology(
-    soup: &Soup,
-    t: &mut Timings,
-    stage: StageCallback<'_>,
-) -> (Welded, Edges, topology::EdgeStats) {
+fn weld_and_topology(soup: &Soup, t: &mut Timings, stage: StageCallback<'_>) -> (Welded, Edges) {
     let welded = timed_weld(soup, true, t, stage);
-    let (edges, es) = timed_topology(&welded, false, t, stage);
-    (welded, edges, es)
+    let edges = timed_topology(&welded, false, t, stage);
+    (welded, edges)
 }
 
 /// Welds a checked soup, timed into `t`; with [`Welded::source_triangle`]
@@ -252,14 +249,15 @@ fn timed_weld(soup: &Soup, sources: bool, t: &mut Timings, stage: StageCallback<
     welded
 }
 
-/// Edges and their statistics, timed into `t`; without the opposite
-/// vertices' triangles (`Edges::opp_tri`) when `opposites_only`.
+/// Edges, timed into `t`; without the opposite vertices' triangles
+/// (`Edges::opp_tri`) when `opposites_only`. (Their statistics come from
+/// the layout's plan, `Plan::edge_stats`.)
 fn timed_topology(
     welded: &Welded,
     opposites_only: bool,
     t: &mut Timings,
     stage: StageCallback<'_>,
-) -> (Edges, topology::EdgeStats) {
+) -> Edges {
     stage("topology");
     let i = Instant::now();
     let (tris, n) = (&welded.triangles, welded.positions.len());
@@ -268,9 +266,8 @@ fn timed_topology(
     } else {
         topology::build_edges(tris, n)
     };
-    let es = topology::edge_stats(&edges);
     t.topology += ms(i);
-    (edges, es)
+    edges
 }
 
 /// The header's statistics of one mesh (`input_triangles`: the soup's
@@ -431,10 +428,11 @@ pub fn build_file_with(
     // round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
     // Nor does it read the opposite vertices' triangles.
-    let (edges, es) = timed_topology(&welded, true, &mut timings, stage);
+    let edges = timed_topology(&welded, true, &mut timings, stage);
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, welded.triangle_count(), cfg.max_mult);
+    let es = plan.edge_stats();
     // A compressed file is one zstd stream, written in order from whole
     // buffers; an uncompressed one is filled block by block at its offsets.
     let layout = cfg
