@@ -1029,7 +1029,7 @@ pub fn edge_stats(edges: &Edges) -> EdgeStats {
 impl EdgeStats {
     /// The statistics of edges whose opposite-vertex counts have the
     /// histogram `hist` (`hist[n]` edges with n opposite vertices), as
-    /// [`fan_histogram`] counts them: how a build gets them from the
+    /// `fan_histogram` counts them: how a build gets them from the
     /// layout's plan, which counts the same histogram per block.
     pub fn from_histogram(hist: &[u64]) -> EdgeStats {
         let histogram: Vec<(u32, u64)> = hist
