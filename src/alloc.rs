@@ -62,12 +62,12 @@ pub const ROUND_UP_FROM: usize = HUGE_MIN / 4;
 /// bytes, so that [`HugePageAlloc`] gives it a large block (a kept one, or
 /// huge pages) instead of malloc's 4 KiB pages.
 ///
-/// Why: a fresh 4 KiB page costs 1.4 µs here, 0.35 ms per MiB, against
-/// 0.12 ms per MiB for huge pages and nothing for a kept block
-/// (`examples/first_touch.rs`); the weld's run ids and bucket numbers and
-/// the topology's counts (1.75, 0.87 and 1.75 MB on the dragon) were
-/// 4.0 MiB of fresh 4 KiB pages with one thread, 5.5 with two
-/// (`benches/fresh_pages.py`). Why not a lower [`HUGE_MIN`] for all
+/// Why: a fresh 4 KiB page costs 1.4 µs here, 0.35 ms per MiB (a local
+/// probe like `examples/first_touch.rs` without the huge-page hint),
+/// against 0.12 ms per MiB for huge pages (`first_touch`) and nothing for
+/// a kept block; the weld's run ids and bucket numbers and the topology's
+/// counts (1.75, 0.87 and 1.75 MB on the dragon) were 4.0 MiB of fresh
+/// 4 KiB pages with one thread, 5.5 with two (`benches/fresh_pages.py`). Why not a lower [`HUGE_MIN`] for all
 /// blocks (tried in the eleventh round): the OBJ parser's many blocks of
 /// 1–2 MiB then each took a huge page, and an OBJ build's peak memory grew
 /// from 70 to 87 MiB. Only the buffers that ask get the rounding.

@@ -217,7 +217,9 @@ fn build_edges_in<const TRI: bool>(
                 c[lo as usize] += 1;
                 c[mid as usize] += 1;
                 // Per range, listings in the high half and records in
-                // the low half (fewer than 2^32 of each): one add for both.
+                // the low half: one add for both. All chunks together have
+                // fewer than 2^32 records (asserted above), so the low
+                // halves never carry, even summed over chunks.
                 rr[range_of(lo)] += (1 << 32) | 2;
                 rr[range_of(mid)] += (1 << 32) | 1;
             }
