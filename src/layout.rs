@@ -150,9 +150,9 @@ impl Plan {
                 counts[k] += c[k];
             }
         }
-        let mut fans = vec![0u64; hists.iter().map(Vec::len).max().unwrap_or(0)];
+        let mut fans = Vec::new();
         for h in &hists {
-            fans.iter_mut().zip(h).for_each(|(f, h)| *f += h);
+            crate::topology::add_histogram(&mut fans, h);
         }
         Plan {
             max_mult,

@@ -1019,13 +1019,19 @@ pub fn edge_stats(edges: &Edges) -> EdgeStats {
             fan_histogram(&starts[k * STATS_BLOCK..=end])
         })
         .reduce(Vec::new, |mut a, b| {
-            if a.len() < b.len() {
-                a.resize(b.len(), 0);
-            }
-            a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+            add_histogram(&mut a, &b);
             a
         });
     EdgeStats::from_histogram(&hist)
+}
+
+/// Adds the fan histogram `h` to `sum` (either may be the longer), as
+/// [`edge_stats`] and `layout::Plan` sum their blocks' histograms.
+pub(crate) fn add_histogram(sum: &mut Vec<u64>, h: &[u64]) {
+    if sum.len() < h.len() {
+        sum.resize(h.len(), 0);
+    }
+    sum.iter_mut().zip(h).for_each(|(s, h)| *s += h);
 }
 
 impl EdgeStats {
