@@ -9,6 +9,7 @@
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld, memory recycled
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
+//! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills, with and without its writes
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
 //! cargo run --release --example stage_probe -- replace DIR   # putting a 120 MiB output in place
 //! ```
@@ -69,10 +70,13 @@ fn main() {
         "build" => build(path),
         "weld" => weld_recycled(path),
         "passes" => passes(path),
+        "fill-write" => fill_write(path),
         "verify" => verify(path),
         "replace" => replace(path),
         _ => {
-            eprintln!("unknown step {what:?}: read, build, verify or replace");
+            eprintln!(
+                "unknown step {what:?}: read, build, weld, passes, fill-write, verify or replace"
+            );
             std::process::exit(1);
         }
     }
@@ -148,6 +152,117 @@ fn passes(path: &Path) {
         best[3],
         best[4]
     );
+}
+
+/// The streamed writer's fills (`format::write_file_streamed`), unit by
+/// unit in file order into one reused buffer as one thread runs them:
+/// alone, then with each unit written at its place in a new file in the
+/// current directory (`pwrite`, as the writer does), 6 rounds of each,
+/// fastest. The caps are also filled with their position gathers replaced
+/// by stores of the corner ids (the same bytes written, nothing gathered),
+/// which tells what the gathers cost each way.
+///
+/// Why: on the dragon the fills take about 10 ms alone and 15 ms between
+/// the writes, the caps most (3.2 → 7.0 ms; 2.7 ms either way without the
+/// gathers). The copy into the page cache streams the whole output through
+/// the caches, so the caps' scattered reads of the position table (5.2 MB)
+/// go to memory instead of L2 and L3 (the README's fifteenth round).
+fn fill_write(path: &Path) {
+    use std::os::unix::fs::FileExt;
+    use svpack::format::PayloadSource;
+    use svpack::layout::{DEFAULT_MAX_MULT, Plan};
+    let soup = svpack::load::load(path).unwrap();
+    let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
+    let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
+    let plan = Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
+    let records = plan.records(&w, &e);
+    let sections = 1 + plan.buckets().count();
+    let units = records.units();
+    let lens = |u: usize| {
+        (0..sections)
+            .map(|s| records.floats(u, s))
+            .collect::<Vec<_>>()
+    };
+    let widest = (0..units).map(|u| lens(u).iter().sum()).max().unwrap_or(0);
+    let mut buf = vec![0f32; widest];
+    // Caps records with the corner ids where the positions go: the stores
+    // without the gathers.
+    let caps_without_gathers = |u: usize, out: &mut [f32]| {
+        let out: &mut [[f32; 4]] = bytemuck::cast_slice_mut(out);
+        let tris = &w.triangles[u * out.len()..];
+        for (slot, &v) in out.iter_mut().zip(tris) {
+            *slot = [v as f32, 0.0, 0.0, 1.0];
+        }
+    };
+    let file_path = Path::new(".svpack-fill-write.tmp");
+    // (fill, caps fill, write) in ms for one round.
+    let mut round = |write: bool, gathers: bool| {
+        let file = write.then(|| std::fs::File::create(file_path).unwrap());
+        let (mut fill, mut caps, mut written) = (0.0, 0.0, 0.0);
+        let mut at = 0u64;
+        for u in 0..units {
+            let lens = lens(u);
+            let t = Instant::now();
+            let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
+            let mut rest = &mut buf[..];
+            for &n in &lens {
+                let (mine, tail) = rest.split_at_mut(n);
+                outs.push(mine);
+                rest = tail;
+            }
+            let is_caps = lens[0] > 0;
+            if is_caps && !gathers {
+                caps_without_gathers(u, outs[0]);
+            } else {
+                records.fill(u, &mut outs);
+            }
+            let d = t.elapsed().as_secs_f64() * 1e3;
+            fill += d;
+            if is_caps {
+                caps += d;
+            }
+            let total: usize = lens.iter().sum();
+            let bytes: &[u8] = bytemuck::cast_slice(&buf[..total]);
+            if let Some(f) = &file {
+                let t = Instant::now();
+                f.write_all_at(bytes, at).unwrap();
+                written += t.elapsed().as_secs_f64() * 1e3;
+            }
+            at += bytes.len() as u64;
+        }
+        if file.is_some() {
+            std::fs::remove_file(file_path).unwrap();
+        }
+        [fill, caps, written]
+    };
+    for (write, gathers) in [(false, true), (true, true), (false, false), (true, false)] {
+        let mut best = [f64::MAX; 3];
+        for _ in 0..6 {
+            for (b, v) in best.iter_mut().zip(round(write, gathers)) {
+                *b = b.min(v);
+            }
+        }
+        println!(
+            "{}{}: fills {:.2} ms (caps {:.2}){}",
+            if write {
+                "each unit written"
+            } else {
+                "fills alone"
+            },
+            if gathers {
+                ""
+            } else {
+                ", caps without gathers"
+            },
+            best[0],
+            best[1],
+            if write {
+                format!(", writes {:.2} ms", best[2])
+            } else {
+                String::new()
+            }
+        );
+    }
 }
 
 /// The build's steps after loading, each on the previous one's output.

@@ -94,7 +94,15 @@ const BLOCK: usize = 1 << 14;
 /// prefetched: the position table is larger than L2 and an edge's or a
 /// triangle's corners are scattered over it (1.5× faster on the dragon,
 /// `layout/ours` in benches/stages.rs).
-const AHEAD: usize = 16;
+///
+/// Why 64 and not 16: between the streamed writer's copies into the page
+/// cache, which carry the whole output through the caches, the positions
+/// come from memory rather than L2 or L3, and 16 records did not cover
+/// that. The dragon's fills unit by unit with each unit written, one
+/// thread, fastest of 6, three alternations: caps 4.6–6.8 → 4.2–4.4 ms,
+/// sides about 7.4 → 6.6–7.1 ms (`stage_probe -- fill-write`); alone the
+/// caps also went 3.7–4.0 → 3.1–3.4 ms.
+const AHEAD: usize = 64;
 
 /// The layout's counting pass: how many instances each bucket gets, in
 /// total and per fill block, so that every block knows where its records go
