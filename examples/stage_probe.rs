@@ -162,9 +162,10 @@ fn passes(path: &Path) {
 /// by stores of the corner ids (the same bytes written, nothing gathered),
 /// which tells what the gathers cost each way.
 ///
-/// Why: on the dragon the fills take about 10 ms alone and 15 ms between
-/// the writes, the caps most (3.2 → 7.0 ms; 2.7 ms either way without the
-/// gathers). The copy into the page cache streams the whole output through
+/// Why: before the fifteenth round's longer prefetch, the dragon's fills
+/// took about 10 ms alone and 12.5–16.7 ms between the writes, the caps
+/// most (3.7–4.0 → 4.6–6.8 ms; 1.7–2.4 ms either way without the
+/// gathers). The copy into the page cache carries the whole output through
 /// the caches, so the caps' scattered reads of the position table (5.2 MB)
 /// go to memory instead of L2 and L3 (the README's fifteenth round).
 fn fill_write(path: &Path) {
