@@ -204,13 +204,7 @@ fn fill_write(path: &Path) {
         for u in 0..units {
             let lens = lens(u);
             let t = Instant::now();
-            let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
-            let mut rest = &mut buf[..];
-            for &n in &lens {
-                let (mine, tail) = rest.split_at_mut(n);
-                outs.push(mine);
-                rest = tail;
-            }
+            let mut outs = svpack::format::split_pieces(&mut buf, &lens);
             let is_caps = lens[0] > 0;
             if is_caps && !gathers {
                 caps_without_gathers(u, outs[0]);

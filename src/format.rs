@@ -672,6 +672,20 @@ pub trait PayloadSource: Sync {
     fn fill(&self, unit: usize, outs: &mut [&mut [f32]]);
 }
 
+/// `buf` cut into consecutive pieces of `lens[i]` floats each (from its
+/// start; what is left over is not in any piece): the `outs` a
+/// [`PayloadSource::fill`] takes.
+pub fn split_pieces<'a>(buf: &'a mut [f32], lens: &[usize]) -> Vec<&'a mut [f32]> {
+    let mut outs = Vec::with_capacity(lens.len());
+    let mut rest = buf;
+    for &n in lens {
+        let (piece, tail) = rest.split_at_mut(n);
+        outs.push(piece);
+        rest = tail;
+    }
+    outs
+}
+
 /// A NaN no record holds, put in every float of a unit's pieces before
 /// [`PayloadSource::fill`] in debug builds, which then check that none is
 /// left.
@@ -852,13 +866,7 @@ pub fn write_file_streamed_finishing(
                 if cfg!(debug_assertions) {
                     fbuf.fill(f32::from_bits(UNWRITTEN));
                 }
-                let mut outs: Vec<&mut [f32]> = Vec::with_capacity(sections);
-                let mut rest = &mut fbuf[..];
-                for &n in &lens {
-                    let (mine, tail) = rest.split_at_mut(n);
-                    outs.push(mine);
-                    rest = tail;
-                }
+                let mut outs = split_pieces(fbuf, &lens);
                 source.fill(u, &mut outs);
                 debug_assert!(
                     fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
