@@ -187,10 +187,12 @@ fn fill_write(path: &Path) {
     let widest = (0..units).map(|u| lens(u).iter().sum()).max().unwrap_or(0);
     let mut buf = vec![0f32; widest];
     // Caps records with the corner ids where the positions go: the stores
-    // without the gathers.
+    // without the gathers. Every caps unit but the last is full, so unit
+    // u's first corner is u times a full unit's.
+    let corners_per_unit = lens(0)[0] / 4;
     let caps_without_gathers = |u: usize, out: &mut [f32]| {
         let out: &mut [[f32; 4]] = bytemuck::cast_slice_mut(out);
-        let tris = &w.triangles[u * out.len()..];
+        let tris = &w.triangles[u * corners_per_unit..];
         for (slot, &v) in out.iter_mut().zip(tris) {
             *slot = [v as f32, 0.0, 0.0, 1.0];
         }

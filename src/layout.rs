@@ -99,9 +99,12 @@ const BLOCK: usize = 1 << 14;
 /// cache, which carry the whole output through the caches, the positions
 /// come from memory rather than L2 or L3, and 16 records did not cover
 /// that. The dragon's fills unit by unit with each unit written, one
-/// thread, fastest of 6, three alternations: caps 4.6–6.8 → 4.2–4.4 ms,
-/// sides about 7.4 → 6.6–7.1 ms (`stage_probe -- fill-write`); alone the
-/// caps also went 3.7–4.0 → 3.1–3.4 ms.
+/// thread, fastest of 6, three alternations: caps 4.6–6.8 → 4.2–4.4 ms
+/// (`stage_probe -- fill-write`), sides 7.4–7.6 → 6.5–7.1 ms (16 against
+/// 48 records; 48 and 64 did not differ); alone the caps also went 3.7–4.0
+/// → 3.1–3.4 ms. Layout + write in the one-thread build: 39.8 / 41.2 →
+/// 37.7 / 39.2 ms, fastest / median (`benches/compare_binaries.py`, 21
+/// rounds); with two threads unchanged, the copy being that stage's length.
 const AHEAD: usize = 64;
 
 /// The layout's counting pass: how many instances each bucket gets, in
