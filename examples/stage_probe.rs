@@ -18,9 +18,12 @@
 //! Only APIs older than the ninth round are used, so the same file builds
 //! at earlier commits (copy it into a worktree) for the before figures; so
 //! the weld timed is `weld::weld`, with the triangle sources the build
-//! itself no longer makes. The exception is `passes`
-//! (`topology::build_edges_opposites_only_timed`, eleventh round): delete
-//! `passes` to build the file at an earlier commit.
+//! itself no longer makes. The exceptions, to delete for an earlier
+//! commit: `passes` (`topology::build_edges_opposites_only_timed`, eleventh
+//! round), `weld` (`weld::weld_without_sources` under an
+//! `alloc::KeepFreed` guard, thirteenth round) and `fill-write`
+//! (`format::split_pieces`, fifteenth round; its before figures came from
+//! this file built with the old prefetch distance instead).
 //!
 //! Two environment variables, for every step: `RECYCLE=1` holds an
 //! `alloc::KeepFreed` guard, so that each run reuses the blocks the one
