@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Alternates two svpack binaries on one input and compares their builds.
 
-Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
+Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] [--rest SECONDS] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
 
 Each round runs `build INPUT -o FRESH --timings --threads T --json` with
 T = 1 and 2, the two binaries back to back in alternating order (this
@@ -9,7 +9,12 @@ machine drifts from minute to minute, so only interleaved runs are
 compared), with `sync` before each run and the output removed first (with
 --replace it is kept: each build replaces that binary's output of the
 previous run, as rebuilding in place does; an untimed build makes the first
-one). Prints,
+one). With --rest S each run waits S seconds after its `sync`: on a
+virtual machine whose host takes freed guest memory back (free page
+reporting, about two seconds after memory is freed), back-to-back runs get
+the memory the run before freed, still backed, and rested runs get cold
+memory, as a build started on its own does (`alloc::huge_pages_hinted`).
+Prints,
 per binary and thread count, the fastest and median whole build, time after parsing
 (weld + topology + layout + write), of layout + write, and the largest peak
 memory; checks that both binaries wrote the same bytes in every run (with
@@ -21,12 +26,14 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 
 
-def build(binary, inp, out, threads, replace=False):
+def build(binary, inp, out, threads, replace=False, rest=0.0):
     if os.path.exists(out) and not replace:
         os.remove(out)
     subprocess.run(["sync"], check=True)
+    time.sleep(rest)
     run = subprocess.run(
         [binary, "build", inp, "-o", out, "--timings", "--threads", str(threads), "--json", "-q"],
         capture_output=True, text=True, check=True)
@@ -40,6 +47,11 @@ def main():
     args = sys.argv[1:]
     allow_different = "--allow-different" in args
     replace = "--replace" in args
+    rest = 0.0
+    if "--rest" in args:
+        i = args.index("--rest")
+        rest = float(args[i + 1])
+        del args[i:i + 2]
     args = [a for a in args if a not in ("--allow-different", "--replace")]
     if len(args) not in (3, 4):
         sys.exit(__doc__)
@@ -58,7 +70,7 @@ def main():
                 for name in (["old", "new"] if r % 2 == 0 else ["new", "old"]):
                     outs[name] = os.path.join(work, name + ".svpk")
                     res.setdefault((name, t), []).append(
-                        build(bins[name], inp, outs[name], t, replace))
+                        build(bins[name], inp, outs[name], t, replace, rest))
                 with open(outs["old"], "rb") as a, open(outs["new"], "rb") as b:
                     if a.read() != b.read():
                         if not allow_different:

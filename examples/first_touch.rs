@@ -9,7 +9,19 @@
 //! pages the process has just freed. The gap between the two is what a fresh
 //! buffer costs a one-shot command such as `svpack build` beyond writing it.
 //!
-//! `cargo run --release --example first_touch -- 400`
+//! With `small` after the size the mapping gets `MADV_NOHUGEPAGE` instead
+//! of the hint: small pages, which the guest takes from its free fragments
+//! (never reported to the host), against huge pages, which come from free
+//! 2 MiB blocks the host may have taken back. Run each in a new process
+//! after a few seconds of rest (`sleep 4`), when the host has taken the
+//! freed blocks back, to see what `alloc::huge_pages_hinted` guards
+//! against, and right after another run to see the warm case:
+//!
+//! ```text
+//! cargo run --release --example first_touch -- 400
+//! sleep 4; target/release/examples/first_touch 48        # cold huge pages
+//! sleep 4; target/release/examples/first_touch 48 small  # small pages
+//! ```
 
 #[cfg(target_os = "linux")]
 fn main() {
@@ -18,6 +30,7 @@ fn main() {
         .nth(1)
         .map(|a| a.parse().expect("MIB: a size in MiB"))
         .unwrap_or(400);
+    let small = std::env::args().nth(2).as_deref() == Some("small");
     let size = mib << 20;
     for round in 0..4 {
         // SAFETY: an anonymous private mapping has no preconditions; it is
@@ -32,7 +45,12 @@ fn main() {
                 0,
             );
             assert!(p != libc::MAP_FAILED, "mmap of {mib} MiB failed");
-            libc::madvise(p, size, libc::MADV_HUGEPAGE);
+            let advice = if small {
+                libc::MADV_NOHUGEPAGE
+            } else {
+                libc::MADV_HUGEPAGE
+            };
+            libc::madvise(p, size, advice);
             let bytes = p as *mut u8;
             let t = Instant::now();
             for i in (0..size).step_by(4096) {

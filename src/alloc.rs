@@ -53,6 +53,45 @@ use std::alloc::{GlobalAlloc, Layout, System};
 /// one huge page (2 MiB on x86-64) is the smallest range the hint can help.
 pub const HUGE_MIN: usize = 2 << 20;
 
+/// A fresh huge page that takes longer than this to fault in means the
+/// system hands out cold huge pages, and [`HugePageAlloc`] stops asking for
+/// them (see [`huge_pages_hinted`]). On this project's virtual machine a
+/// huge page faults in in 0.23–0.30 ms when the host still backs it and in
+/// 5.4–6.0 ms when it does not (a local probe, 36 faults in three runs).
+pub const COLD_FAULT: std::time::Duration = std::time::Duration::from_millis(2);
+
+/// Whether [`HugePageAlloc`] still gives fresh large blocks the huge-page
+/// hint: true until a fresh huge page took longer than [`COLD_FAULT`] to
+/// fault in (or [`stop_huge_pages`] was called), then false for the rest of
+/// the process, whose later fresh blocks get small pages.
+///
+/// Why: on a virtual machine whose host takes freed guest memory back
+/// (free page reporting, as Firecracker, WSL 2 and some clouds do), the
+/// guest reports free 2 MiB blocks to the host about two seconds after
+/// they are freed, and a huge page the guest then hands out is faulted in
+/// by the host as well: 117–137 ms for 48 MiB here against 5.8–6.3 ms for
+/// one the host still backs, while small pages come from the guest's free
+/// fragments, which are never reported: 16.4–18.4 ms either way
+/// (`examples/first_touch.rs`). The allocator cannot know in advance which
+/// kind the kernel will hand out, so it times the first huge page of each
+/// fresh block: a build started seconds after the last one (cold) then
+/// costs about what small pages cost, and one started right after another
+/// (warm) keeps its huge pages.
+pub fn huge_pages_hinted() -> bool {
+    #[cfg(target_os = "linux")]
+    return sys::hinting();
+    #[cfg(not(target_os = "linux"))]
+    false
+}
+
+/// Stops the huge-page hint for the rest of the process, as a slow first
+/// fault does (see [`huge_pages_hinted`]): later fresh large blocks get
+/// small pages (`MADV_NOHUGEPAGE`). Blocks already handed out keep theirs.
+pub fn stop_huge_pages() {
+    #[cfg(target_os = "linux")]
+    sys::stop_hinting();
+}
+
 /// Smallest buffer that [`large_capacity`] rounds up to [`HUGE_MIN`] bytes.
 pub const ROUND_UP_FROM: usize = HUGE_MIN / 4;
 
@@ -279,8 +318,32 @@ fn is_large(size: usize, align: usize) -> bool {
 
 #[cfg(target_os = "linux")]
 mod sys {
-    /// A fresh zeroed mapping of `size` bytes with the huge-page hint, or null.
+    use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
+
+    /// Whether fresh mappings still get the huge-page hint (see
+    /// [`super::huge_pages_hinted`]).
+    static HINT: AtomicBool = AtomicBool::new(true);
+
+    pub fn hinting() -> bool {
+        HINT.load(Relaxed)
+    }
+
+    /// Stops the hint for the rest of the process.
+    pub fn stop_hinting() {
+        HINT.store(false, Relaxed);
+    }
+
+    /// A fresh zeroed mapping of `size` bytes, or null. With the huge-page
+    /// hint while [`hinting`], after which its first whole huge page is
+    /// faulted in and timed: slower than [`super::COLD_FAULT`], the hint
+    /// stops, for this mapping's other pages too.
     pub fn map(size: usize) -> *mut u8 {
+        map_with(size, super::COLD_FAULT)
+    }
+
+    /// [`map`] with `cold` as the slowest fault that keeps the hint (tests
+    /// pass zero to take the cold path on any machine).
+    pub fn map_with(size: usize, cold: std::time::Duration) -> *mut u8 {
         // SAFETY: an anonymous private mapping has no preconditions.
         let p = unsafe {
             libc::mmap(
@@ -296,14 +359,42 @@ mod sys {
             return std::ptr::null_mut();
         }
         advise(p, size);
+        if hinting() && first_huge_fault(p.cast(), size) > cold {
+            stop_hinting();
+            advise(p, size);
+        }
         p.cast()
     }
 
-    /// The hint only changes how later faults are served; a kernel without
-    /// THP rejects it, which is harmless, so the result is not checked.
+    /// Faults in the first whole huge page of the fresh mapping `p` of
+    /// `size` bytes by writing a zero into it (a read would map the shared
+    /// zero page), and returns how long that took; zero if the mapping
+    /// holds no whole huge page.
+    fn first_huge_fault(p: *mut u8, size: usize) -> std::time::Duration {
+        let first = (p as usize).next_multiple_of(super::HUGE_MIN);
+        if first + super::HUGE_MIN > p as usize + size {
+            return std::time::Duration::ZERO;
+        }
+        let t = std::time::Instant::now();
+        // SAFETY: `first` lies inside the mapping, which is writable and
+        // still all zero, as the caller expects of a fresh block after this.
+        unsafe { p.add(first - p as usize).write_volatile(0) };
+        t.elapsed()
+    }
+
+    /// The hint while [`hinting`], else its opposite (so that a kernel
+    /// whose transparent huge pages are `always` backs the mapping with
+    /// small pages too). Either only changes how later faults are served;
+    /// a kernel without THP rejects both, which is harmless, so the result
+    /// is not checked.
     pub fn advise(p: *mut libc::c_void, size: usize) {
+        let advice = if hinting() {
+            libc::MADV_HUGEPAGE
+        } else {
+            libc::MADV_NOHUGEPAGE
+        };
         // SAFETY: `p..p + size` is a mapping this allocator owns.
-        unsafe { libc::madvise(p, size, libc::MADV_HUGEPAGE) };
+        unsafe { libc::madvise(p, size, advice) };
     }
 
     /// # Safety
@@ -433,6 +524,65 @@ mod tests {
 
     /// The cache is one for the process: tests that use it run one at a time.
     static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+    /// Whether the kernel may back the mapping holding `p` with huge pages
+    /// (`THPeligible` in `/proc/self/smaps`), or None if no mapping holds it.
+    #[cfg(target_os = "linux")]
+    fn thp_eligible(p: *mut u8) -> Option<bool> {
+        let smaps = std::fs::read_to_string("/proc/self/smaps").unwrap();
+        let mut inside = false;
+        for line in smaps.lines() {
+            let range = line.split_whitespace().next().unwrap_or("");
+            if let Some((lo, hi)) = range.split_once('-')
+                && let (Ok(lo), Ok(hi)) =
+                    (usize::from_str_radix(lo, 16), usize::from_str_radix(hi, 16))
+            {
+                inside = (lo..hi).contains(&(p as usize));
+            } else if inside && let Some(v) = line.strip_prefix("THPeligible:") {
+                return Some(v.trim() == "1");
+            }
+        }
+        None
+    }
+
+    /// While the hint lives a fresh block may take huge pages; once a first
+    /// fault is slower than the threshold (zero here, so any machine takes
+    /// this path), that block and every later fresh one are not eligible
+    /// (`MADV_NOHUGEPAGE`), and the hint stays off. Caught: the slow block
+    /// left with its hint (eligible), and later blocks given the hint
+    /// whatever the flag says.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_slow_first_huge_page_stops_the_hint() {
+        let _serial = SERIAL.lock().unwrap();
+        let thp_on = std::fs::read_to_string("/sys/kernel/mm/transparent_hugepage/enabled")
+            .is_ok_and(|s| !s.contains("[never]"));
+        let size = 4 * HUGE_MIN;
+        let before = sys::map(size);
+        assert!(!before.is_null());
+        // Another test's block (or this one) may have met a cold huge page
+        // on this machine already; the mapping must agree with the flag.
+        assert_eq!(
+            thp_eligible(before),
+            Some(thp_on && huge_pages_hinted()),
+            "a fresh block before the slow fault"
+        );
+        let slow = sys::map_with(size, std::time::Duration::ZERO);
+        assert!(!slow.is_null());
+        assert!(!huge_pages_hinted());
+        assert_eq!(thp_eligible(slow), Some(false), "the block that was slow");
+        let after = sys::map(size);
+        assert_eq!(thp_eligible(after), Some(false), "a later block");
+        // The blocks are usable and zero, the probed page too.
+        for p in [before, slow, after] {
+            unsafe {
+                let s = std::slice::from_raw_parts_mut(p, size);
+                assert!(s.iter().all(|&b| b == 0));
+                s.fill(1);
+                sys::unmap(p, size);
+            }
+        }
+    }
 
     /// Blocks and bytes the cache holds.
     #[cfg(target_os = "linux")]

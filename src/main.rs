@@ -143,8 +143,9 @@ enum Command {
         #[arg(long)]
         verify: bool,
         /// Add per-stage wall times (load, weld, topology, layout, write,
-        /// total) and peak memory to the summary (`timings_ms`,
-        /// `peak_memory_bytes` in JSON).
+        /// total), peak memory and whether fresh memory came in huge pages
+        /// to the summary (`timings_ms`, `peak_memory_bytes`, `huge_pages`
+        /// in JSON).
         #[arg(long)]
         timings: bool,
         #[command(flatten)]
@@ -568,6 +569,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                         if timings {
                             s.timings_ms = Some(out.timings);
                             s.peak_memory_bytes = svpack::build::peak_memory_bytes();
+                            s.huge_pages = Some(svpack::alloc::huge_pages_hinted());
                         }
                         s.warnings = out.warnings;
                         if json && batch {

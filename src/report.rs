@@ -99,6 +99,13 @@ pub struct Summary {
     /// batch, of the whole batch so far).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub peak_memory_bytes: Option<u64>,
+    /// Whether the process still gave fresh large buffers huge pages when
+    /// the build ended (`build --timings`): false once a fresh huge page
+    /// was slow to fault in and later buffers got small pages
+    /// (`alloc::huge_pages_hinted`), which explains a slower first touch
+    /// of memory in the timings.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub huge_pages: Option<bool>,
     /// Loader warnings (build only).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
@@ -184,6 +191,7 @@ impl Summary {
             time_ms: None,
             timings_ms: None,
             peak_memory_bytes: None,
+            huge_pages: None,
             warnings: Vec::new(),
         }
     }
@@ -284,6 +292,11 @@ impl Summary {
             );
             if let Some(peak) = self.peak_memory_bytes {
                 let _ = write!(o, "; peak memory {}", human_bytes(peak));
+            }
+            match self.huge_pages {
+                Some(true) => o.push_str("; huge pages"),
+                Some(false) => o.push_str("; small pages (fresh huge pages were slow)"),
+                None => {}
             }
         }
         let _ = write!(

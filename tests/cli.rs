@@ -262,6 +262,8 @@ fn timings_threads_and_quiet_progress() {
         let total = t["total"].as_f64().unwrap();
         assert!(stages <= total * 1.0001 + 1e-3, "{stages} > {total}");
         assert!(v["peak_memory_bytes"].as_u64().unwrap() > 1 << 20);
+        // Whichever pages this machine handed out, the field says which.
+        assert!(v["huge_pages"].is_boolean(), "huge_pages: {v}");
         assert!(
             o.stderr.is_empty(),
             "stderr: {}",
@@ -281,7 +283,11 @@ fn timings_threads_and_quiet_progress() {
         .stdout
         .clone();
     let v: serde_json::Value = serde_json::from_slice(&o).unwrap();
-    assert!(v.get("timings_ms").is_none() && v.get("peak_memory_bytes").is_none());
+    assert!(
+        v.get("timings_ms").is_none()
+            && v.get("peak_memory_bytes").is_none()
+            && v.get("huge_pages").is_none()
+    );
     // A batch (which would show a bar on a terminal) writes nothing to a piped stderr.
     let inputs: Vec<_> = fx.iter().map(|f| f.1.clone()).collect();
     svpack()
