@@ -14,7 +14,7 @@
 //! (never reported to the host), against huge pages, which come from free
 //! 2 MiB blocks the host may have taken back. Run each in a new process
 //! after a few seconds of rest (`sleep 4`), when the host has taken the
-//! freed blocks back, to see what `alloc::huge_pages_hinted` guards
+//! freed blocks back, to see what `alloc::cold_memory_seen` guards
 //! against, and right after another run to see the warm case:
 //!
 //! ```text

@@ -17,6 +17,17 @@
 //! computes, and a kernel without THP ignores it. On other systems the
 //! allocator is exactly `System`.
 //!
+//! **The hint pauses while fresh huge pages are slow** ([`cold_memory_seen`]):
+//! the first whole huge page of every fresh block is faulted in and timed
+//! when the block is mapped, and one slower than [`COLD_FAULT`] turns the
+//! hint into `MADV_NOHUGEPAGE` for that block and for every fresh block of
+//! the next [`COLD_PAUSE`]; the first fresh block after that probes again.
+//! Why: on a virtual machine whose host takes freed memory back, huge pages
+//! come from blocks the host no longer backs and cost about 20× their usual
+//! price, while small pages still come from memory it backs; a dragon
+//! build started a few seconds after the last one took twice as long with
+//! the hint as without.
+//!
 //! **While a [`KeepFreed`] guard lives, freed large blocks are kept for
 //! reuse** ([`CACHE_SLOTS`] of them, at most [`CACHE_BYTES`] in all)
 //! instead of being unmapped at once; the last guard's drop unmaps what is
@@ -54,42 +65,44 @@ use std::alloc::{GlobalAlloc, Layout, System};
 pub const HUGE_MIN: usize = 2 << 20;
 
 /// A fresh huge page that takes longer than this to fault in means the
-/// system hands out cold huge pages, and [`HugePageAlloc`] stops asking for
-/// them (see [`huge_pages_hinted`]). On this project's virtual machine a
+/// system hands out cold huge pages, and [`HugePageAlloc`] pauses asking
+/// for them (see [`cold_memory_seen`]). On this project's virtual machine a
 /// huge page faults in in 0.23–0.30 ms when the host still backs it and in
 /// 5.4–6.0 ms when it does not (a local probe, 36 faults in three runs).
 pub const COLD_FAULT: std::time::Duration = std::time::Duration::from_millis(2);
 
-/// Whether [`HugePageAlloc`] still gives fresh large blocks the huge-page
-/// hint: true until a fresh huge page took longer than [`COLD_FAULT`] to
-/// fault in (or [`stop_huge_pages`] was called), then false for the rest of
-/// the process, whose later fresh blocks get small pages.
+/// How long [`HugePageAlloc`] gives fresh large blocks small pages after a
+/// slow huge page (see [`cold_memory_seen`]). Long enough that a build of
+/// the dragon (0.1–0.3 s) probes once; short enough that a long-running
+/// process (a batch, a benchmark), whose own freed blocks come back as
+/// huge pages the host still backs, gets them again: each probe of cold
+/// memory costs about 5 ms against 0.7 ms for the same 2 MiB in small
+/// pages, so one a second is at most 0.5% of the time.
+pub const COLD_PAUSE: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Whether a fresh huge page has been slower than [`COLD_FAULT`] to fault
+/// in since the process started, so that [`HugePageAlloc`] gave fresh large
+/// blocks small pages for a while (`MADV_NOHUGEPAGE`, for [`COLD_PAUSE`]
+/// after each slow fault; the first fresh block after that probes again).
 ///
 /// Why: on a virtual machine whose host takes freed guest memory back
 /// (free page reporting, as Firecracker, WSL 2 and some clouds do), the
 /// guest reports free 2 MiB blocks to the host about two seconds after
 /// they are freed, and a huge page the guest then hands out is faulted in
-/// by the host as well: 117–137 ms for 48 MiB here against 5.8–6.3 ms for
-/// one the host still backs, while small pages come from the guest's free
-/// fragments, which are never reported: 16.4–18.4 ms either way
+/// by the host as well: 114–137 ms for 48 MiB here against 5.8–11.1 ms for
+/// one the host still backs, while small pages come from the guest's
+/// smaller free fragments, which are not reported: 16.0–19.7 ms either way
 /// (`examples/first_touch.rs`). The allocator cannot know in advance which
 /// kind the kernel will hand out, so it times the first huge page of each
-/// fresh block: a build started seconds after the last one (cold) then
-/// costs about what small pages cost, and one started right after another
-/// (warm) keeps its huge pages.
-pub fn huge_pages_hinted() -> bool {
+/// fresh block: a build started seconds after the last one (cold memory)
+/// then costs about what small pages cost, and one started right after
+/// another (warm) keeps its huge pages. Build timings report it
+/// (`cold_memory` in `build --timings --json`).
+pub fn cold_memory_seen() -> bool {
     #[cfg(target_os = "linux")]
-    return sys::hinting();
+    return sys::cold_seen();
     #[cfg(not(target_os = "linux"))]
     false
-}
-
-/// Stops the huge-page hint for the rest of the process, as a slow first
-/// fault does (see [`huge_pages_hinted`]): later fresh large blocks get
-/// small pages (`MADV_NOHUGEPAGE`). Blocks already handed out keep theirs.
-pub fn stop_huge_pages() {
-    #[cfg(target_os = "linux")]
-    sys::stop_hinting();
 }
 
 /// Smallest buffer that [`large_capacity`] rounds up to [`HUGE_MIN`] bytes.
@@ -318,32 +331,61 @@ fn is_large(size: usize, align: usize) -> bool {
 
 #[cfg(target_os = "linux")]
 mod sys {
-    use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
+    use std::time::Duration;
 
-    /// Whether fresh mappings still get the huge-page hint (see
-    /// [`super::huge_pages_hinted`]).
-    static HINT: AtomicBool = AtomicBool::new(true);
+    /// Until when (monotonic clock, ns) fresh mappings get small pages: set
+    /// [`super::COLD_PAUSE`] after a slow huge page.
+    static COLD_UNTIL: AtomicU64 = AtomicU64::new(0);
 
-    pub fn hinting() -> bool {
-        HINT.load(Relaxed)
+    /// Whether a huge page has been slow (see [`super::cold_memory_seen`]).
+    static COLD_SEEN: AtomicBool = AtomicBool::new(false);
+
+    /// The monotonic clock in ns (`Instant` cannot be stored in an atomic).
+    fn now_ns() -> u64 {
+        let mut t = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `t` is a valid timespec to write.
+        unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut t) };
+        t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64
     }
 
-    /// Stops the hint for the rest of the process.
-    pub fn stop_hinting() {
-        HINT.store(false, Relaxed);
+    /// Whether fresh mappings get the huge-page hint now.
+    pub fn hinting() -> bool {
+        now_ns() >= COLD_UNTIL.load(Relaxed)
+    }
+
+    pub fn cold_seen() -> bool {
+        COLD_SEEN.load(Relaxed)
+    }
+
+    /// Ends a pause now (tests, whose blocks may have met cold memory).
+    #[cfg(test)]
+    pub fn end_pause() {
+        COLD_UNTIL.store(0, Relaxed);
+    }
+
+    /// Fresh mappings get small pages for the next `pause`.
+    fn pause_hinting(pause: Duration) {
+        COLD_SEEN.store(true, Relaxed);
+        let ns = u64::try_from(pause.as_nanos()).unwrap_or(u64::MAX);
+        COLD_UNTIL.store(now_ns().saturating_add(ns), Relaxed);
     }
 
     /// A fresh zeroed mapping of `size` bytes, or null. With the huge-page
     /// hint while [`hinting`], after which its first whole huge page is
     /// faulted in and timed: slower than [`super::COLD_FAULT`], the hint
-    /// stops, for this mapping's other pages too.
+    /// pauses for [`super::COLD_PAUSE`], this mapping's other pages included.
     pub fn map(size: usize) -> *mut u8 {
-        map_with(size, super::COLD_FAULT)
+        map_with(size, super::COLD_FAULT, super::COLD_PAUSE)
     }
 
-    /// [`map`] with `cold` as the slowest fault that keeps the hint (tests
-    /// pass zero to take the cold path on any machine).
-    pub fn map_with(size: usize, cold: std::time::Duration) -> *mut u8 {
+    /// [`map`] with `cold` as the slowest fault that keeps the hint and
+    /// `pause` as the pause after a slower one (tests pass a zero `cold` to
+    /// take the cold path on any machine).
+    pub fn map_with(size: usize, cold: Duration, pause: Duration) -> *mut u8 {
         // SAFETY: an anonymous private mapping has no preconditions.
         let p = unsafe {
             libc::mmap(
@@ -358,10 +400,11 @@ mod sys {
         if p == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        advise(p, size);
-        if hinting() && first_huge_fault(p.cast(), size) > cold {
-            stop_hinting();
-            advise(p, size);
+        let hint = hinting();
+        advise(p, size, hint);
+        if hint && first_huge_fault(p.cast(), size) > cold {
+            pause_hinting(pause);
+            advise(p, size, false);
         }
         p.cast()
     }
@@ -370,10 +413,10 @@ mod sys {
     /// `size` bytes by writing a zero into it (a read would map the shared
     /// zero page), and returns how long that took; zero if the mapping
     /// holds no whole huge page.
-    fn first_huge_fault(p: *mut u8, size: usize) -> std::time::Duration {
+    fn first_huge_fault(p: *mut u8, size: usize) -> Duration {
         let first = (p as usize).next_multiple_of(super::HUGE_MIN);
         if first + super::HUGE_MIN > p as usize + size {
-            return std::time::Duration::ZERO;
+            return Duration::ZERO;
         }
         let t = std::time::Instant::now();
         // SAFETY: `first` lies inside the mapping, which is writable and
@@ -382,13 +425,13 @@ mod sys {
         t.elapsed()
     }
 
-    /// The hint while [`hinting`], else its opposite (so that a kernel
-    /// whose transparent huge pages are `always` backs the mapping with
-    /// small pages too). Either only changes how later faults are served;
-    /// a kernel without THP rejects both, which is harmless, so the result
-    /// is not checked.
-    pub fn advise(p: *mut libc::c_void, size: usize) {
-        let advice = if hinting() {
+    /// The hint if `hint`, else its opposite (so that a kernel whose
+    /// transparent huge pages are `always` backs the mapping with small
+    /// pages too). Either only changes how later faults are served; a
+    /// kernel without THP rejects both, which is harmless, so the result is
+    /// not checked.
+    fn advise(p: *mut libc::c_void, size: usize, hint: bool) {
+        let advice = if hint {
             libc::MADV_HUGEPAGE
         } else {
             libc::MADV_NOHUGEPAGE
@@ -413,7 +456,7 @@ mod sys {
         if q == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        advise(q, new);
+        advise(q, new, hinting());
         q.cast()
     }
 }
@@ -545,36 +588,56 @@ mod tests {
         None
     }
 
-    /// While the hint lives a fresh block may take huge pages; once a first
+    /// While the hint is on a fresh block may take huge pages; once a first
     /// fault is slower than the threshold (zero here, so any machine takes
-    /// this path), that block and every later fresh one are not eligible
-    /// (`MADV_NOHUGEPAGE`), and the hint stays off. Caught: the slow block
-    /// left with its hint (eligible), and later blocks given the hint
-    /// whatever the flag says.
+    /// this path), that block and the fresh blocks of the pause after it
+    /// are not eligible (`MADV_NOHUGEPAGE`), and after the pause a fresh
+    /// block is again. Caught: the slow block left with its hint (eligible),
+    /// later blocks given the hint during the pause, and the hint never
+    /// coming back.
     #[cfg(target_os = "linux")]
     #[test]
-    fn a_slow_first_huge_page_stops_the_hint() {
+    fn a_slow_first_huge_page_pauses_the_hint() {
+        use std::time::Duration;
         let _serial = SERIAL.lock().unwrap();
         let thp_on = std::fs::read_to_string("/sys/kernel/mm/transparent_hugepage/enabled")
             .is_ok_and(|s| !s.contains("[never]"));
         let size = 4 * HUGE_MIN;
-        let before = sys::map(size);
+        // Another test's block may have met cold memory on this machine
+        // within the last pause; a block must agree with the state it met.
+        let hinted = sys::hinting();
+        let before = sys::map_with(size, Duration::MAX, COLD_PAUSE);
         assert!(!before.is_null());
-        // Another test's block (or this one) may have met a cold huge page
-        // on this machine already; the mapping must agree with the flag.
         assert_eq!(
             thp_eligible(before),
-            Some(thp_on && huge_pages_hinted()),
-            "a fresh block before the slow fault"
+            Some(thp_on && hinted),
+            "a fresh block"
         );
-        let slow = sys::map_with(size, std::time::Duration::ZERO);
+        // A slow first fault, with a pause longer than this test.
+        sys::end_pause();
+        let long = Duration::from_secs(3600);
+        let slow = sys::map_with(size, Duration::ZERO, long);
         assert!(!slow.is_null());
-        assert!(!huge_pages_hinted());
+        assert!(cold_memory_seen() && !sys::hinting());
         assert_eq!(thp_eligible(slow), Some(false), "the block that was slow");
-        let after = sys::map(size);
-        assert_eq!(thp_eligible(after), Some(false), "a later block");
-        // The blocks are usable and zero, the probed page too.
-        for p in [before, slow, after] {
+        let during = sys::map_with(size, Duration::MAX, long);
+        assert_eq!(
+            thp_eligible(during),
+            Some(false),
+            "a block during the pause"
+        );
+        // A slow fault with a short pause: the hint is back once it ends.
+        let short = Duration::from_millis(20);
+        sys::end_pause();
+        let last = sys::map_with(size, Duration::ZERO, short);
+        assert_eq!(thp_eligible(last), Some(false), "a slow block, short pause");
+        std::thread::sleep(2 * short);
+        assert!(sys::hinting());
+        let after = sys::map_with(size, Duration::MAX, COLD_PAUSE);
+        assert_eq!(thp_eligible(after), Some(thp_on), "a block after the pause");
+        sys::end_pause();
+        // The blocks are usable and zero, the probed pages too.
+        for p in [before, slow, during, last, after] {
             unsafe {
                 let s = std::slice::from_raw_parts_mut(p, size);
                 assert!(s.iter().all(|&b| b == 0));

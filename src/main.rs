@@ -143,9 +143,9 @@ enum Command {
         #[arg(long)]
         verify: bool,
         /// Add per-stage wall times (load, weld, topology, layout, write,
-        /// total), peak memory and whether fresh memory came in huge pages
-        /// to the summary (`timings_ms`, `peak_memory_bytes`, `huge_pages`
-        /// in JSON).
+        /// total), peak memory and whether the build met cold memory to the
+        /// summary (`timings_ms`, `peak_memory_bytes`, `cold_memory` in
+        /// JSON).
         #[arg(long)]
         timings: bool,
         #[command(flatten)]
@@ -569,7 +569,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                         if timings {
                             s.timings_ms = Some(out.timings);
                             s.peak_memory_bytes = svpack::build::peak_memory_bytes();
-                            s.huge_pages = Some(svpack::alloc::huge_pages_hinted());
+                            s.cold_memory = Some(svpack::alloc::cold_memory_seen());
                         }
                         s.warnings = out.warnings;
                         if json && batch {

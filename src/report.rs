@@ -99,13 +99,12 @@ pub struct Summary {
     /// batch, of the whole batch so far).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub peak_memory_bytes: Option<u64>,
-    /// Whether the process still gave fresh large buffers huge pages when
-    /// the build ended (`build --timings`): false once a fresh huge page
-    /// was slow to fault in and later buffers got small pages
-    /// (`alloc::huge_pages_hinted`), which explains a slower first touch
-    /// of memory in the timings.
+    /// Whether the process met cold memory (`build --timings`): a fresh
+    /// huge page slow to fault in, after which fresh buffers got small
+    /// pages for a while (`alloc::cold_memory_seen`); it explains slower
+    /// stages in the timings.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub huge_pages: Option<bool>,
+    pub cold_memory: Option<bool>,
     /// Loader warnings (build only).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
@@ -191,7 +190,7 @@ impl Summary {
             time_ms: None,
             timings_ms: None,
             peak_memory_bytes: None,
-            huge_pages: None,
+            cold_memory: None,
             warnings: Vec::new(),
         }
     }
@@ -293,10 +292,8 @@ impl Summary {
             if let Some(peak) = self.peak_memory_bytes {
                 let _ = write!(o, "; peak memory {}", human_bytes(peak));
             }
-            match self.huge_pages {
-                Some(true) => o.push_str("; huge pages"),
-                Some(false) => o.push_str("; small pages (fresh huge pages were slow)"),
-                None => {}
+            if self.cold_memory == Some(true) {
+                o.push_str("; cold memory (fresh huge pages were slow, small pages used)");
             }
         }
         let _ = write!(

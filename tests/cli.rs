@@ -263,7 +263,7 @@ fn timings_threads_and_quiet_progress() {
         assert!(stages <= total * 1.0001 + 1e-3, "{stages} > {total}");
         assert!(v["peak_memory_bytes"].as_u64().unwrap() > 1 << 20);
         // Whichever pages this machine handed out, the field says which.
-        assert!(v["huge_pages"].is_boolean(), "huge_pages: {v}");
+        assert!(v["cold_memory"].is_boolean(), "cold_memory: {v}");
         assert!(
             o.stderr.is_empty(),
             "stderr: {}",
@@ -286,7 +286,7 @@ fn timings_threads_and_quiet_progress() {
     assert!(
         v.get("timings_ms").is_none()
             && v.get("peak_memory_bytes").is_none()
-            && v.get("huge_pages").is_none()
+            && v.get("cold_memory").is_none()
     );
     // A batch (which would show a bar on a terminal) writes nothing to a piped stderr.
     let inputs: Vec<_> = fx.iter().map(|f| f.1.clone()).collect();
