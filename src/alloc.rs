@@ -505,9 +505,11 @@ mod sys {
         if p == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        // During a pause, small pages while the budget lasts.
-        let probe = hinting();
-        advise(p, size, probe || !take_small(size));
+        // During a pause, small pages while the budget lasts. With the
+        // budget spent (a build whose output takes the warm memory) there
+        // is nothing to probe for: huge pages, as without the probe.
+        let probe = hinting() && SMALL_LEFT.load(Relaxed) > 0;
+        advise(p, size, hinting() || !take_small(size));
         if probe && first_huge_fault(p.cast(), size) > cold {
             pause_hinting(pause);
             if take_small(size) {
@@ -700,10 +702,11 @@ mod tests {
     /// fault is slower than the threshold (zero here, so any machine takes
     /// this path), that block and the fresh blocks of the pause after it
     /// are not eligible (`MADV_NOHUGEPAGE`) while the small-page budget
-    /// lasts, and after the pause a fresh block is again. Caught: the slow
-    /// block left with its hint (eligible), later blocks given the hint
-    /// during the pause, the hint never coming back, and blocks past the
-    /// budget given small pages.
+    /// lasts, and after the pause a fresh block is again; with no budget
+    /// there is no probe. Caught: the slow block left with its hint
+    /// (eligible), later blocks given the hint during the pause, the hint
+    /// never coming back, blocks past the budget given small pages, and a
+    /// probe (and pause) with no budget.
     #[cfg(target_os = "linux")]
     #[test]
     fn a_slow_first_huge_page_pauses_the_hint() {
@@ -740,6 +743,16 @@ mod tests {
         // The budget is spent: huge pages again, cold or not.
         let spent = sys::map_with(size, Duration::MAX, long);
         assert_eq!(thp_eligible(spent), Some(thp_on), "a block past the budget");
+        // With no budget at all, no probe: a slow fault changes nothing.
+        sys::end_pause();
+        sys::set_small_budget(0);
+        let unprobed = sys::map_with(size, Duration::ZERO, long);
+        assert!(sys::hinting(), "a probe with no budget");
+        assert_eq!(
+            thp_eligible(unprobed),
+            Some(thp_on),
+            "a block with no budget"
+        );
         // A slow fault with a short pause: the hint is back once it ends.
         let short = Duration::from_millis(20);
         sys::end_pause();
@@ -753,7 +766,7 @@ mod tests {
         sys::end_pause();
         sys::set_small_budget(u64::MAX);
         // The blocks are usable and zero, the probed pages too.
-        for p in [before, slow, during, spent, last, after] {
+        for p in [before, slow, during, spent, unprobed, last, after] {
             unsafe {
                 let s = std::slice::from_raw_parts_mut(p, size);
                 assert!(s.iter().all(|&b| b == 0));
