@@ -13,7 +13,7 @@ one). With --rest S each run waits S seconds after its `sync`: on a
 virtual machine whose host takes freed guest memory back (free page
 reporting, about two seconds after memory is freed), back-to-back runs get
 the memory the run before freed, still backed, and rested runs get cold
-memory, as a build started on its own does (`alloc::huge_pages_hinted`).
+memory, as a build started on its own does (`alloc::cold_memory_seen`).
 Prints,
 per binary and thread count, the fastest and median whole build, time after parsing
 (weld + topology + layout + write), of layout + write, and the largest peak

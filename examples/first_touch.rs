@@ -11,8 +11,8 @@
 //!
 //! With `small` after the size the mapping gets `MADV_NOHUGEPAGE` instead
 //! of the hint: small pages, which the guest takes from its free fragments
-//! (never reported to the host), against huge pages, which come from free
-//! 2 MiB blocks the host may have taken back. Run each in a new process
+//! (not reported to the host themselves), against huge pages, which come
+//! from free 2 MiB blocks the host may have taken back. Run each in a new process
 //! after a few seconds of rest (`sleep 4`), when the host has taken the
 //! freed blocks back, to see what `alloc::cold_memory_seen` guards
 //! against, and right after another run to see the warm case:

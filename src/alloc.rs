@@ -95,10 +95,10 @@ pub const COLD_PAUSE: std::time::Duration = std::time::Duration::from_secs(1);
 /// (free page reporting, as Firecracker, WSL 2 and some clouds do), the
 /// guest reports free 2 MiB blocks to the host about two seconds after
 /// they are freed, and a huge page the guest then hands out is faulted in
-/// by the host as well: 114–137 ms for 48 MiB here against 5.8–11.1 ms for
+/// by the host as well: 114–129 ms for 48 MiB here against 5.8–11.1 ms for
 /// one the host still backs, while small pages come from the guest's
-/// smaller free fragments, which are not reported: 16.0–19.7 ms either way
-/// (`examples/first_touch.rs`). The allocator cannot know in advance which
+/// smaller free fragments, which are not reported themselves: 16.0–19.7 ms
+/// either way (`examples/first_touch.rs`). The allocator cannot know in advance which
 /// kind the kernel will hand out, so it times the first huge page of each
 /// fresh block: a build started seconds after the last one (cold memory)
 /// then costs about what small pages cost, and one started right after
@@ -388,8 +388,8 @@ mod sys {
     }
 
     /// Bytes of small pages fresh mappings may still take during pauses;
-    /// `u64::MAX` until the first slow huge page sets it
-    /// ([`small_page_budget`]).
+    /// `u64::MAX` until first measured ([`small_page_budget`], by the first
+    /// reserve or the first slow huge page).
     static SMALL_LEFT: AtomicU64 = AtomicU64::new(u64::MAX);
 
     /// Half the free memory in blocks smaller than a huge page
@@ -508,9 +508,9 @@ mod sys {
         // During a pause, small pages while the budget lasts. With the
         // budget spent (a build whose output takes the warm memory) there
         // is nothing to probe for: huge pages, as without the probe.
-        let probe = hinting() && SMALL_LEFT.load(Relaxed) > 0;
-        advise(p, size, hinting() || !take_small(size));
-        if probe && first_huge_fault(p.cast(), size) > cold {
+        let hint = hinting();
+        advise(p, size, hint || !take_small(size));
+        if hint && SMALL_LEFT.load(Relaxed) > 0 && first_huge_fault(p.cast(), size) > cold {
             pause_hinting(pause);
             if take_small(size) {
                 advise(p, size, false);
