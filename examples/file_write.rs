@@ -8,7 +8,14 @@
 //! - two threads, one file, alternate megabytes each;
 //! - two threads, two files, half the bytes each;
 //! - one thread, one file whose blocks are reserved first (`fallocate`, as
-//!   `format::write_file_streamed` does on ext4 and XFS), the call timed.
+//!   `format::write_file_streamed` does on ext4 and XFS), the call timed;
+//! - two threads, one reserved file: one writes the last four fifths, the
+//!   other fills the first fifth through a shared mapping (no write call,
+//!   so no inode lock);
+//! - two threads, one reserved file: one fills each megabyte into a buffer
+//!   (a `memset`, as cheap as a fill gets), the other writes the buffers it
+//!   is handed (four in flight), so the copy reads memory another core
+//!   wrote.
 //!
 //! Five rounds of each, interleaved; prints the fastest and the median.
 //!
@@ -37,7 +44,14 @@ fn main() {
     let buf: Vec<u8> = (0..CHUNK).map(|i| (i * 7 + 3) as u8).collect();
     let path = |n: usize| dir.join(format!(".svpack-file-write-{n}.tmp"));
     let create = |n: usize, len: usize, reserve: bool| {
-        let f = std::fs::File::create(path(n)).expect("a new file in DIR");
+        // (Readable too: a shared mapping needs it.)
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(path(n))
+            .expect("a new file in DIR");
         f.set_len(len as u64).unwrap();
         if reserve {
             // SAFETY: an open descriptor; the call only reserves blocks.
@@ -56,6 +70,8 @@ fn main() {
         "two threads, one file",
         "two threads, two files",
         "one thread, one file, blocks reserved first",
+        "two threads, one reserved file, its first fifth through a mapping",
+        "two threads, one reserved file, buffers filled by one, written by the other",
     ];
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); ways.len()];
     for _ in 0..5 {
@@ -70,11 +86,51 @@ fn main() {
                         fill(&f, 0, 2, size);
                     });
                 }
-                _ => {
+                2 => {
                     let (a, b) = (create(0, size / 2, false), create(1, size / 2, false));
                     std::thread::scope(|s| {
                         s.spawn(|| fill(&b, 0, 1, size / 2));
                         fill(&a, 0, 1, size / 2);
+                    });
+                }
+                4 => {
+                    let f = create(0, size, true);
+                    let mapped = size / 5 / CHUNK * CHUNK;
+                    std::thread::scope(|s| {
+                        s.spawn(|| {
+                            // SAFETY: a new file of this process, not
+                            // truncated while mapped, its blocks reserved.
+                            let mut m = unsafe {
+                                memmap2::MmapOptions::new().len(mapped).map_mut(&f).unwrap()
+                            };
+                            for c in m.chunks_mut(CHUNK) {
+                                c.copy_from_slice(&buf[..c.len()]);
+                            }
+                        });
+                        for c in mapped / CHUNK..size / CHUNK {
+                            f.write_all_at(&buf, (c * CHUNK) as u64).unwrap();
+                        }
+                    });
+                }
+                _ => {
+                    let f = create(0, size, true);
+                    let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<(usize, Vec<u8>)>(4);
+                    let (free_tx, free_rx) = std::sync::mpsc::channel::<Vec<u8>>();
+                    for _ in 0..4 {
+                        free_tx.send(vec![0u8; CHUNK]).unwrap();
+                    }
+                    std::thread::scope(|s| {
+                        s.spawn(move || {
+                            for c in 0..size / CHUNK {
+                                let mut b = free_rx.recv().unwrap();
+                                b.fill(c as u8 | 1);
+                                full_tx.send((c, b)).unwrap();
+                            }
+                        });
+                        for (c, b) in full_rx {
+                            f.write_all_at(&b, (c * CHUNK) as u64).unwrap();
+                            let _ = free_tx.send(b);
+                        }
                     });
                 }
             }

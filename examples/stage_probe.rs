@@ -9,7 +9,7 @@
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld, memory recycled
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
-//! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills, with and without its writes
+//! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills, with and without its writes, and its writes alone
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
 //! cargo run --release --example stage_probe -- replace DIR   # putting a 120 MiB output in place
 //! ```
@@ -201,9 +201,20 @@ fn fill_write(path: &Path) {
         }
     };
     let file_path = Path::new(".svpack-fill-write.tmp");
-    // (fill, caps fill, write) in ms for one round.
-    let mut round = |write: bool, gathers: bool| {
-        let file = write.then(|| std::fs::File::create(file_path).unwrap());
+    let total: usize = (0..units).map(|u| lens(u).iter().sum::<usize>()).sum();
+    // (fill, caps fill, write) in ms for one round; with `gathers` None,
+    // no fills at all: the same writes of a buffer no fill has just
+    // passed through the caches.
+    let mut round = |write: bool, gathers: Option<bool>| {
+        let file = write.then(|| {
+            let f = std::fs::File::create(file_path).unwrap();
+            // Its blocks reserved first, as `format::write_file_streamed`
+            // does on ext4 and XFS.
+            use std::os::unix::io::AsRawFd;
+            // SAFETY: an open descriptor; the call only reserves blocks.
+            unsafe { libc::fallocate(f.as_raw_fd(), 0, 0, (4 * total) as libc::off_t) };
+            f
+        });
         let (mut fill, mut caps, mut written) = (0.0, 0.0, 0.0);
         let mut at = 0u64;
         for u in 0..units {
@@ -211,7 +222,9 @@ fn fill_write(path: &Path) {
             let t = Instant::now();
             let mut outs = svpack::format::split_pieces(&mut buf, &lens);
             let is_caps = lens[0] > 0;
-            if is_caps && !gathers {
+            if gathers.is_none() {
+                // No fill.
+            } else if is_caps && gathers == Some(false) {
                 caps_without_gathers(u, outs[0]);
             } else {
                 records.fill(u, &mut outs);
@@ -235,7 +248,13 @@ fn fill_write(path: &Path) {
         }
         [fill, caps, written]
     };
-    for (write, gathers) in [(false, true), (true, true), (false, false), (true, false)] {
+    for (write, gathers) in [
+        (false, Some(true)),
+        (true, Some(true)),
+        (false, Some(false)),
+        (true, Some(false)),
+        (true, None),
+    ] {
         let mut best = [f64::MAX; 3];
         for _ in 0..6 {
             for (b, v) in best.iter_mut().zip(round(write, gathers)) {
@@ -249,10 +268,10 @@ fn fill_write(path: &Path) {
             } else {
                 "fills alone"
             },
-            if gathers {
-                ""
-            } else {
-                ", caps without gathers"
+            match gathers {
+                Some(true) => "",
+                Some(false) => ", caps without gathers",
+                None => ", no fills (the writes alone)",
             },
             best[0],
             best[1],
