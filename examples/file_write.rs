@@ -97,7 +97,12 @@ fn main() {
                     let f = create(0, size, true);
                     let mapped = size / 5 / CHUNK * CHUNK;
                     std::thread::scope(|s| {
+                        // (Nothing to map below 5 MiB: a mapping cannot be
+                        // empty.)
                         s.spawn(|| {
+                            if mapped == 0 {
+                                return;
+                            }
                             // SAFETY: a new file of this process, not
                             // truncated while mapped, its blocks reserved.
                             let mut m = unsafe {

@@ -435,11 +435,13 @@ fn sort_vertices<'w>(
             |(scratch, counts), (b, g)| {
                 if g.len() > SMALL_SORT {
                     scratch.resize(g.len(), 0);
-                    let (lo, hi) = (edge(b), edge(b + 1));
-                    if buckets > 1 && lo < hi {
-                        counting_pass::<96, true>(g, scratch, counts, lo, hi - lo);
-                    } else {
-                        sort_words(g, scratch, counts);
+                    // (One bucket: no linear scale to take edges from.)
+                    let guess = (buckets > 1).then(|| (edge(b), edge(b + 1)));
+                    match guess {
+                        Some((lo, hi)) if lo < hi => {
+                            counting_pass::<96, true>(g, scratch, counts, lo, hi - lo)
+                        }
+                        _ => sort_words(g, scratch, counts),
                     }
                 } else {
                     insertion_sort(g);
