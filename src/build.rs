@@ -431,8 +431,84 @@ pub fn build_file_with(
     // slow part of a fresh buffer, especially in a VM (README, "Fifth
     // round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
-    // Nor does it read the opposite vertices' triangles.
-    let edges = timed_topology(&welded, true, &mut timings, stage);
+    // The headers, with what the edges decide (statistics, buckets) and
+    // the bounds still to come; their length is all `write_ahead` needs.
+    let name = input
+        .file_stem()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut mesh_header = MeshHeader {
+        name,
+        bounds_min: [0.0; 3],
+        bounds_max: [0.0; 3],
+        position_offset: space.offset,
+        position_scale: space.scale,
+        stats: MeshStats::default(),
+        caps: Section {
+            offset: 0,
+            length: 0,
+            count: 0,
+        },
+        buckets: Vec::new(),
+    };
+    let mut header = Header {
+        payload_offset: 0,
+        payload_len: 0,
+        payload_crc32: 0,
+        generator: generator(),
+        input: InputInfo {
+            file_name: file_name(input),
+            format: match fmt {
+                load::Format::Gltf => "gltf".into(),
+                load::Format::Obj => "obj".into(),
+            },
+            // Set from `digest` as the file is written.
+            bytes: 0,
+            sha256: [0; 32],
+        },
+        options: BuildOptions {
+            max_mult: cfg.max_mult,
+            compress: cfg.compress,
+            positions: cfg.positions.code(),
+        },
+        bounds_min: [0.0; 3],
+        bounds_max: [0.0; 3],
+        meshes: Vec::new(),
+        reserved: 0,
+    };
+    // The edges (only their opposite vertices: nothing reads the opposite
+    // vertices' triangles), and with two threads or more, an uncompressed
+    // file's caps written meanwhile (`format::write_ahead`): a file with
+    // header room (`format::header_room`) starts its payload at an offset
+    // the edges do not change (unless its mesh has more distinct opposite
+    // counts than the room holds: then the writer writes the caps again).
+    // Why: README, "Eighteenth round".
+    stage("topology");
+    let i = Instant::now();
+    let triangles = welded.triangle_count() as u64;
+    let early = MeshHeader {
+        stats: MeshStats {
+            triangles,
+            ..MeshStats::default()
+        },
+        ..mesh_header.clone()
+    };
+    let room = format::header_room(&Header {
+        meshes: vec![early.clone()],
+        ..header.clone()
+    })?;
+    let ahead_wanted = !cfg.compress && room.is_some() && rayon::current_num_threads() >= 2;
+    let (edges, ahead) = rayon::join(
+        || topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
+        || {
+            ahead_wanted.then(|| {
+                let caps = layout::CapsRecords::new(&welded);
+                format::write_ahead(output, header.clone(), early, &caps)
+            })
+        },
+    );
+    let ahead = ahead.transpose()?;
+    timings.topology += ms(i);
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, welded.triangle_count(), cfg.max_mult);
@@ -457,56 +533,18 @@ pub fn build_file_with(
         ));
     }
     let (bmin, bmax) = world_bounds.unwrap_or_else(|| bounds(&welded.positions));
-    let name = input
-        .file_stem()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let mesh_header = MeshHeader {
-        name,
-        bounds_min: bmin,
-        bounds_max: bmax,
-        position_offset: space.offset,
-        position_scale: space.scale,
-        stats,
-        caps: Section {
+    (mesh_header.bounds_min, mesh_header.bounds_max) = (bmin, bmax);
+    (header.bounds_min, header.bounds_max) = (bmin, bmax);
+    mesh_header.stats = stats;
+    mesh_header.buckets = plan
+        .buckets()
+        .map(|(k, instances)| BucketHeader {
+            k,
+            instances,
             offset: 0,
             length: 0,
-            count: 0,
-        },
-        buckets: plan
-            .buckets()
-            .map(|(k, instances)| BucketHeader {
-                k,
-                instances,
-                offset: 0,
-                length: 0,
-            })
-            .collect(),
-    };
-    let header = Header {
-        payload_offset: 0,
-        payload_len: 0,
-        payload_crc32: 0,
-        generator: generator(),
-        input: InputInfo {
-            file_name: file_name(input),
-            format: match fmt {
-                load::Format::Gltf => "gltf".into(),
-                load::Format::Obj => "obj".into(),
-            },
-            // Set from `digest` as the file is written.
-            bytes: 0,
-            sha256: [0; 32],
-        },
-        options: BuildOptions {
-            max_mult: cfg.max_mult,
-            compress: cfg.compress,
-            positions: cfg.positions.code(),
-        },
-        bounds_min: bmin,
-        bounds_max: bmax,
-        meshes: Vec::new(),
-    };
+        })
+        .collect();
     stage("write");
     let write_start = Instant::now();
     let (header, file_bytes) = match &layout {
@@ -528,6 +566,7 @@ pub fn build_file_with(
                 header,
                 mesh_header,
                 &records,
+                ahead,
                 &|| digest.step(),
                 || digest.finish(),
             )?

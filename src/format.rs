@@ -27,7 +27,8 @@ pub const MAGIC: [u8; 8] = *b"SVPK\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 2;
 /// Minor version: readers accept any minor of their major (fields are only
 /// ever appended to the header, and the header length lets old readers skip them).
-pub const VERSION_MINOR: u16 = 0;
+/// 2.1 appended [`Header::reserved`].
+pub const VERSION_MINOR: u16 = 1;
 /// Bytes before the header.
 pub const PREAMBLE_LEN: usize = 24;
 /// Payload and section alignment.
@@ -67,7 +68,7 @@ pub struct Header {
     pub payload_len: u64,
     /// CRC-32 (IEEE, as zlib/PNG) of the payload bytes.
     pub payload_crc32: u32,
-    /// Tool that wrote the file, e.g. "svpack 0.2.0".
+    /// Tool that wrote the file, e.g. "svpack 0.2.1".
     pub generator: String,
     /// Where the geometry came from.
     pub input: InputInfo,
@@ -79,6 +80,13 @@ pub struct Header {
     pub bounds_max: [f32; 3],
     /// Meshes in drawing order.
     pub meshes: Vec<MeshHeader>,
+    /// Zero bytes at the end of the header (format 2.1; 0 in 2.0 files),
+    /// after a u64 count of them: the room a writer keeps so that the
+    /// header's length, and so where the payload starts, is known before
+    /// the edge statistics are ([`header_room`]). Not part of the serde
+    /// structure: [`encode_header`] appends it and the reader reads it.
+    #[serde(skip)]
+    pub reserved: u64,
 }
 
 /// Input description.
@@ -408,12 +416,87 @@ fn crc_records_serial(hasher: &mut crc32fast::Hasher, floats: &[f32], enc: Encod
     write_records(&mut H(hasher), floats, enc).expect("hashing cannot fail");
 }
 
-/// The header's bytes, which must not change length once sections are
-/// placed: fixed-width integers make the length independent of the offsets
-/// and the checksum.
-fn encode_header(header: &Header) -> Result<Vec<u8>> {
-    bincode::serde::encode_to_vec(header, bincode_config())
-        .map_err(|e| Error::Other(format!("cannot encode header: {e}")))
+/// The header's bytes as a file holds them (format-spec §3): the 2.0
+/// fields, then [`Header::reserved`], its count and that many zeros. Their
+/// length does not change once sections are placed: fixed-width integers
+/// make it independent of the offsets and the checksum.
+pub fn encode_header(header: &Header) -> Result<Vec<u8>> {
+    let mut bytes = bincode::serde::encode_to_vec(header, bincode_config())
+        .map_err(|e| Error::Other(format!("cannot encode header: {e}")))?;
+    bytes.extend_from_slice(&header.reserved.to_le_bytes());
+    bytes.resize(bytes.len() + header.reserved as usize, 0);
+    Ok(bytes)
+}
+
+/// Fewest kept triangles for which a writer keeps header room
+/// ([`header_room`]). Smaller files gain nothing from writing their caps
+/// early.
+pub const ROOM_MIN_TRIANGLES: u64 = 1 << 16;
+
+/// Histogram entries (distinct opposite counts) the header room holds. The
+/// most any of the 26 models in `../shared/meshes` has is 5 (three of them
+/// have 4 or 5); a mesh with more is written without room.
+pub const ROOM_HISTOGRAM_ENTRIES: usize = 64;
+
+/// The length a writer gives the header of `header` if the file keeps
+/// room: a one-mesh file of at least [`ROOM_MIN_TRIANGLES`] triangles
+/// (compressed too, so that a compressed file holds the same container as
+/// an uncompressed one but for its `compress` flag). `header` needs its
+/// strings, options and the mesh's name and `stats.triangles`; offsets,
+/// statistics and buckets do not count. The length is that of the header
+/// with [`ROOM_HISTOGRAM_ENTRIES`] histogram entries and a bucket for every
+/// k up to K, which does not depend on the edges; a header up to that long
+/// is padded to it with [`Header::reserved`] (about 0.9 KB of zeros on the
+/// dragon), a longer one is written as it is. Why: with two threads the
+/// caps (a third of the file) are written while the edges are being made,
+/// which needs to know where the payload starts (README, "Eighteenth
+/// round").
+pub fn header_room(header: &Header) -> Result<Option<usize>> {
+    let [mesh] = header.meshes.as_slice() else {
+        return Ok(None);
+    };
+    if mesh.stats.triangles < ROOM_MIN_TRIANGLES {
+        return Ok(None);
+    }
+    let longest = MeshHeader {
+        stats: MeshStats {
+            histogram: vec![
+                HistogramEntry {
+                    opposites: 0,
+                    edges: 0
+                };
+                ROOM_HISTOGRAM_ENTRIES
+            ],
+            ..mesh.stats.clone()
+        },
+        buckets: vec![
+            BucketHeader {
+                k: 0,
+                instances: 0,
+                offset: 0,
+                length: 0
+            };
+            header.options.max_mult as usize
+        ],
+        ..mesh.clone()
+    };
+    let probe = Header {
+        meshes: vec![longest],
+        reserved: 0,
+        ..header.clone()
+    };
+    Ok(Some(encode_header(&probe)?.len()))
+}
+
+/// Sets `header.reserved` so that the header is [`header_room`] bytes long
+/// where the file keeps room and the header fits in it, and to 0 elsewhere.
+fn reserve_room(header: &mut Header) -> Result<()> {
+    header.reserved = 0;
+    if let Some(room) = header_room(header)? {
+        let len = encode_header(header)?.len();
+        header.reserved = room.saturating_sub(len) as u64;
+    }
+    Ok(())
 }
 
 /// Fills every section's offset, length and count and the payload's offset
@@ -426,6 +509,7 @@ fn place_sections(header: &mut Header, floats: &[Vec<u64>]) -> Result<usize> {
         .map_err(Error::Other)?
         .vec4_bytes();
     // One encoding with zeros tells where the payload starts.
+    reserve_room(header)?;
     let probe_len = encode_header(header)?.len();
     let payload_offset = align_up((PREAMBLE_LEN + probe_len) as u64);
     let mut offset = payload_offset;
@@ -721,8 +805,8 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
     }
 }
 
-/// Reserves the disk blocks of a new `size`-byte `file` before it is
-/// written, on ext4 and XFS only (`fallocate`); anywhere else, or if the
+/// Reserves the disk blocks of bytes `from..size` of a new `size`-byte
+/// `file` before they are written, on ext4 and XFS only (`fallocate`); anywhere else, or if the
 /// call fails, the writes allocate as they go, as without it.
 ///
 /// Why: with no blocks behind it, every 4 KiB block a buffered write covers
@@ -735,7 +819,7 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
 /// filesystems: on tmpfs, for one, `fallocate` zeroes pages that the
 /// writes then overwrite. The reserved blocks are "unwritten" until written
 /// back, which the kernel does later, outside the build.
-fn preallocate(file: &std::fs::File, size: u64) {
+fn preallocate(file: &std::fs::File, from: u64, size: u64) {
     #[cfg(target_os = "linux")]
     {
         use std::os::unix::io::AsRawFd;
@@ -752,11 +836,13 @@ fn preallocate(file: &std::fs::File, size: u64) {
             // Mode 0 (allocate, may extend): the size is already `size`.
             // A failure (no space for the reservation, an old kernel) is
             // left to the writes, which report it if it is real.
-            let _ = libc::fallocate(fd, 0, 0, size as libc::off_t);
+            if size > from {
+                let _ = libc::fallocate(fd, 0, from as libc::off_t, (size - from) as libc::off_t);
+            }
         }
     }
     #[cfg(not(target_os = "linux"))]
-    let _ = (file, size);
+    let _ = (file, from, size);
 }
 
 /// Writes a one-mesh uncompressed file to `path` atomically, filling the
@@ -777,11 +863,151 @@ pub fn write_file_streamed(
     source: &dyn PayloadSource,
 ) -> Result<(Header, u64)> {
     let input = (header.input.bytes, header.input.sha256);
-    write_file_streamed_finishing(path, header, mesh, source, &|| false, move || input)
+    write_file_streamed_finishing(path, header, mesh, source, None, &|| false, move || input)
 }
 
-/// [`write_file_streamed`], with the header's input byte count and SHA-256
-/// given by `input` once the payload is written, and `side` called, a slice
+/// The first units of a payload, already written into the temp file that
+/// will become the output ([`write_ahead`]), with where each went and its
+/// CRC.
+pub struct WrittenAhead {
+    tmp: tempfile::NamedTempFile,
+    /// Per unit: its section-0 piece's file offset, byte length and CRC.
+    pieces: Vec<(u64, u64, crc32fast::Hasher)>,
+}
+
+impl WrittenAhead {
+    /// Number of units written.
+    pub fn units(&self) -> usize {
+        self.pieces.len()
+    }
+
+    /// Where the pieces start in the file (the first unit's offset), if any.
+    pub fn offset(&self) -> Option<u64> {
+        self.pieces.first().map(|p| p.0)
+    }
+}
+
+/// Writes the units of `source`, a payload with one section (the caps),
+/// into a new temp file beside `path`, one after the other on the calling
+/// thread, at the offsets a file with `header` and `mesh` puts them:
+/// the start of a [`write_file_streamed_finishing`] of the same caps that
+/// can run before the side buckets are known. `mesh` needs its name and
+/// `stats.triangles` only: it is placed as a file with header room
+/// ([`header_room`]), whose payload starts at the same offset whatever its
+/// edges.
+///
+/// Why: on ext4, writes into one file take the file's lock in turn, so the
+/// copy into the page cache is serial: with two threads, the write stage
+/// was one thread copying the whole output while the other filled units
+/// and then waited. Copying the caps (a third of the dragon's output)
+/// while the other thread makes the edges takes them off that serial path
+/// (README, "Eighteenth round"). Should the final header put the caps
+/// elsewhere (one too long for its room: a mesh with more than
+/// [`ROOM_HISTOGRAM_ENTRIES`] distinct opposite counts), the writer
+/// discards these pieces and writes the file from the start.
+pub fn write_ahead(
+    path: &Path,
+    mut header: Header,
+    mesh: MeshHeader,
+    source: &dyn PayloadSource,
+) -> Result<WrittenAhead> {
+    let enc = header.options.encoding().map_err(Error::Other)?;
+    let per_float = enc.vec4_bytes() / 4;
+    let units = source.units();
+    let mut floats = vec![0u64; 1 + mesh.buckets.len()];
+    floats[0] = (0..units).map(|u| source.floats(u, 0) as u64).sum();
+    header.meshes = vec![mesh];
+    place_sections(&mut header, std::slice::from_ref(&floats))?;
+    let caps = header.meshes[0].caps;
+    let tmp = temp_beside(path)?;
+    let file = tmp.as_file();
+    let end = caps.offset + caps.length;
+    file.set_len(end).map_err(|e| Error::io(path, e))?;
+    preallocate(file, 0, end);
+    let widest = (0..units).map(|u| source.floats(u, 0)).max().unwrap_or(0);
+    let mut bufs = unit_buffers(widest);
+    let mut at = caps.offset;
+    let mut pieces = Vec::with_capacity(units);
+    for u in 0..units {
+        let len = source.floats(u, 0) as u64 * per_float;
+        let write = |bytes: &[u8], offset: u64| write_at(file, bytes, offset);
+        let mut crc = write_unit(source, u, 1, enc, &[at], &mut bufs, &write)
+            .map_err(|e| Error::io(path, e))?;
+        pieces.push((at, len, crc.pop().unwrap_or_default()));
+        at += len;
+    }
+    Ok(WrittenAhead { tmp, pieces })
+}
+
+/// A thread's buffers for [`write_unit`]: the floats, large enough for
+/// `widest` (rounded up to a large block, `alloc::large_capacity`, since
+/// the dragon's units of 0.8–1 MB took fresh 4 KiB pages, 2 MiB of them
+/// with one thread), and the bytes of an encoding other than f32.
+fn unit_buffers(widest: usize) -> (Vec<f32>, Vec<u8>) {
+    (
+        Vec::with_capacity(crate::alloc::large_capacity::<f32>(widest)),
+        Vec::new(),
+    )
+}
+
+/// Fills unit `u` of `source` (`sections` sections) into the buffers and
+/// writes each non-empty piece with `write` at `starts[s]`; returns the
+/// pieces' CRCs.
+fn write_unit(
+    source: &dyn PayloadSource,
+    u: usize,
+    sections: usize,
+    enc: Encoding,
+    starts: &[u64],
+    (fbuf, bbuf): &mut (Vec<f32>, Vec<u8>),
+    write: &dyn Fn(&[u8], u64) -> std::io::Result<()>,
+) -> std::io::Result<Vec<crc32fast::Hasher>> {
+    let per_float = enc.vec4_bytes() / 4;
+    let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
+    // Not zeroed first: `fill` writes every float (which debug builds
+    // check with a sentinel). Zeroing was a memset of the whole output,
+    // 125 MB on the dragon.
+    let total = lens.iter().sum();
+    if fbuf.len() < total {
+        fbuf.resize(total, 0.0);
+    }
+    let fbuf = &mut fbuf[..total];
+    if cfg!(debug_assertions) {
+        fbuf.fill(f32::from_bits(UNWRITTEN));
+    }
+    let mut outs = split_pieces(fbuf, &lens);
+    source.fill(u, &mut outs);
+    debug_assert!(
+        fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
+        "unit {u}: the payload source left floats unwritten"
+    );
+    let mut hashes = Vec::with_capacity(sections);
+    let mut at = 0;
+    for (s, &n) in lens.iter().enumerate() {
+        let piece = &fbuf[at..at + n];
+        at += n;
+        let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little") {
+            bytemuck::cast_slice(piece)
+        } else {
+            bbuf.resize(n * per_float as usize, 0);
+            let len = encode_floats(piece, enc, bbuf);
+            &bbuf[..len]
+        };
+        let mut h = crc32fast::Hasher::new();
+        h.update(bytes);
+        if !bytes.is_empty() {
+            write(bytes, starts[s])?;
+        }
+        hashes.push(h);
+    }
+    Ok(hashes)
+}
+
+/// [`write_file_streamed`], with the first units of the payload already
+/// written when `ahead` has them at the offsets this file puts them (else
+/// they are discarded and written again), the header's input byte count
+/// and SHA-256 given by `input` once the payload is written, and `side`
+/// called, a slice
 /// of work at a time, by a thread about to write while another is writing:
 /// how a build finishes a digest its load left pending
 /// (`load::DigestSlices`). `side` returns false once it has nothing left.
@@ -799,6 +1025,7 @@ pub fn write_file_streamed_finishing(
     mut header: Header,
     mesh: MeshHeader,
     source: &dyn PayloadSource,
+    ahead: Option<WrittenAhead>,
     side: &(dyn Fn() -> bool + Sync),
     input: impl FnOnce() -> (u64, [u8; 32]),
 ) -> Result<(Header, u64)> {
@@ -829,89 +1056,70 @@ pub fn write_file_streamed_finishing(
         }
     }
 
-    let tmp = temp_beside(path)?;
-    let file = tmp.as_file();
+    // The units written ahead, if each went exactly where this file puts
+    // it (one section-0 piece and nothing else).
+    let ahead = ahead.filter(|a| {
+        a.units() <= units
+            && a.pieces.iter().enumerate().all(|(u, &(at, len, _))| {
+                starts[u * sections] == at
+                    && source.floats(u, 0) as u64 * per_float == len
+                    && (1..sections).all(|s| source.floats(u, s) == 0)
+            })
+    });
     let size = container_len(&header);
+    let (tmp, done, from) = match ahead {
+        Some(a) => {
+            let from = a.pieces.last().map_or(0, |p| p.0 + p.1);
+            (a.tmp, a.pieces.into_iter().map(|p| p.2).collect(), from)
+        }
+        None => (temp_beside(path)?, Vec::new(), 0),
+    };
+    let file = tmp.as_file();
     file.set_len(size).map_err(|e| Error::io(path, e))?;
-    preallocate(file, size);
+    preallocate(file, from, size);
     // Set while a thread writes (a hint: two threads may both write, and
     // the kernel then serialises them as before).
     let writing = AtomicBool::new(false);
-    // Each thread's fill buffer holds the largest unit; rounded up to a
-    // large block (`alloc::large_capacity`), since the dragon's units of
-    // 0.8–1 MB took fresh 4 KiB pages, 2 MiB of them with one thread.
-    let widest = (0..units)
+    // Each thread's fill buffer holds the largest unit.
+    let widest = (done.len()..units)
         .map(|u| (0..sections).map(|s| source.floats(u, s)).sum::<usize>())
         .max()
         .unwrap_or(0);
-    let crcs: Vec<Vec<crc32fast::Hasher>> = (0..units)
-        .into_par_iter()
-        .map_init(
-            || {
-                (
-                    Vec::<f32>::with_capacity(crate::alloc::large_capacity::<f32>(widest)),
-                    Vec::<u8>::new(),
-                )
-            },
-            |(fbuf, bbuf), u| {
-                let lens: Vec<usize> = (0..sections).map(|s| source.floats(u, s)).collect();
-                // Not zeroed first: `fill` writes every float (which debug
-                // builds check with a sentinel). Zeroing was a memset of
-                // the whole output, 125 MB on the dragon.
-                let total = lens.iter().sum();
-                if fbuf.len() < total {
-                    fbuf.resize(total, 0.0);
-                }
-                let fbuf = &mut fbuf[..total];
-                if cfg!(debug_assertions) {
-                    fbuf.fill(f32::from_bits(UNWRITTEN));
-                }
-                let mut outs = split_pieces(fbuf, &lens);
-                source.fill(u, &mut outs);
-                debug_assert!(
-                    fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
-                    "unit {u}: the payload source left floats unwritten"
-                );
-                let mut hashes = Vec::with_capacity(sections);
-                let mut at = 0;
-                for (s, &n) in lens.iter().enumerate() {
-                    let piece = &fbuf[at..at + n];
-                    at += n;
-                    let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little") {
-                        bytemuck::cast_slice(piece)
-                    } else {
-                        bbuf.resize(n * per_float as usize, 0);
-                        let len = encode_floats(piece, enc, bbuf);
-                        &bbuf[..len]
-                    };
-                    let mut h = crc32fast::Hasher::new();
-                    h.update(bytes);
-                    if !bytes.is_empty() {
-                        // Another thread's write holds the file: side work
-                        // until it is done (or none is left).
-                        while writing.load(Relaxed) {
-                            if !side() {
-                                break;
-                            }
-                        }
-                        writing.store(true, Relaxed);
-                        let written = write_at(file, bytes, starts[u * sections + s]);
-                        writing.store(false, Relaxed);
-                        written.map_err(|e| Error::io(path, e))?;
-                    }
-                    hashes.push(h);
-                }
-                Ok(hashes)
-            },
-        )
-        .collect::<Result<_>>()?;
+    let write = |bytes: &[u8], offset: u64| {
+        // Another thread's write holds the file: side work until it is
+        // done (or none is left).
+        while writing.load(Relaxed) {
+            if !side() {
+                break;
+            }
+        }
+        writing.store(true, Relaxed);
+        let written = write_at(file, bytes, offset);
+        writing.store(false, Relaxed);
+        written
+    };
+    let mut crcs: Vec<Vec<crc32fast::Hasher>> = done.into_iter().map(|h| vec![h]).collect();
+    crcs.extend(
+        (crcs.len()..units)
+            .into_par_iter()
+            .map_init(
+                || unit_buffers(widest),
+                |bufs, u| {
+                    let starts = &starts[u * sections..(u + 1) * sections];
+                    write_unit(source, u, sections, enc, starts, bufs, &write)
+                        .map_err(|e| Error::io(path, e))
+                },
+            )
+            .collect::<Result<Vec<_>>>()?,
+    );
     (header.input.bytes, header.input.sha256) = input();
     // The payload's CRC: every section's pieces in unit order, then the
     // section's zero padding (as `write_records` writes it).
     let mut crc = crc32fast::Hasher::new();
     for (s, &f) in floats.iter().enumerate() {
-        for unit in &crcs {
-            crc.combine(&unit[s]);
+        // (A unit written ahead has its one section's CRC only.)
+        for unit in crcs.iter().filter_map(|u| u.get(s)) {
+            crc.combine(unit);
         }
         let bytes = f * per_float;
         crc.update(&[0u8; 16][..(align_up(bytes) - bytes) as usize]);
@@ -1126,9 +1334,34 @@ fn decode_bytes(
     if crc32fast::hash(hbytes) != u32_at(16) {
         return Err(err("header checksum mismatch (file corrupted)".into()));
     }
-    let (header, used): (Header, usize) =
+    let (mut header, mut used): (Header, usize) =
         bincode::serde::decode_from_slice(hbytes, bincode_config())
             .map_err(|e| err(format!("cannot decode header: {e}")))?;
+    if minor >= 1 {
+        // 2.1: the reserved room, a count and that many zeros.
+        let rest = &hbytes[used..];
+        let count = rest
+            .get(..8)
+            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+            .ok_or_else(|| {
+                err("cannot decode header: the reserved room's count is missing".into())
+            })?;
+        let zeros = usize::try_from(count)
+            .ok()
+            .and_then(|n| n.checked_add(8))
+            .and_then(|end| rest.get(8..end))
+            .ok_or_else(|| {
+                err(format!(
+                    "cannot decode header: {count} reserved bytes, only {} left",
+                    rest.len() - 8
+                ))
+            })?;
+        if zeros.iter().any(|&b| b != 0) {
+            return Err(err("header's reserved room is not zero".into()));
+        }
+        header.reserved = count;
+        used += 8 + zeros.len();
+    }
     // Same major, newer minor: trailing header fields we do not know are fine.
     let newer_minor = minor > VERSION_MINOR;
     if used != header_len && !newer_minor {
@@ -1289,7 +1522,7 @@ mod tests {
             0,
             "a sparse file to start"
         );
-        preallocate(&file, size);
+        preallocate(&file, 0, size);
         let meta = file.metadata().unwrap();
         assert_eq!(meta.len(), size);
         // SAFETY: plain data filled by `fstatfs` on an open descriptor.

@@ -225,8 +225,7 @@ impl Plan {
 
     /// Floats that caps block `blk` writes.
     pub fn cap_block_floats(&self, blk: usize) -> usize {
-        let end = ((blk + 1) * BLOCK).min(self.triangles);
-        (end - blk * BLOCK) * 12
+        cap_block_floats(self.triangles, blk)
     }
 
     /// Writes side block `blk`'s records: `outs[k]` receives bucket k's,
@@ -278,26 +277,70 @@ impl Plan {
     /// Writes caps block `blk`'s records into `out`
     /// ([`Plan::cap_block_floats`]`(blk)` floats).
     pub fn fill_caps(&self, welded: &Welded, blk: usize, out: &mut [f32]) {
-        let pos = &welded.positions[..];
-        let end = ((blk + 1) * BLOCK).min(self.triangles);
-        let tris = &welded.triangles[3 * blk * BLOCK..3 * end];
-        let out: &mut [[f32; 4]] = bytemuck::cast_slice_mut(out);
-        let ahead = tris.get(3 * AHEAD..).unwrap_or(&[]);
-        for (i, (rec, c)) in out
-            .chunks_exact_mut(3)
-            .zip(tris.chunks_exact(3))
-            .enumerate()
-        {
-            if let Some(f) = ahead.get(3 * i..3 * i + 3) {
-                for &v in f {
-                    prefetch(&pos[v as usize]);
-                }
-            }
-            for (slot, &v) in rec.iter_mut().zip(c) {
-                let p = pos[v as usize];
-                *slot = [p[0], p[1], p[2], 1.0];
+        fill_caps(welded, blk, out);
+    }
+}
+
+/// Floats that caps block `blk` of a mesh of `triangles` triangles writes.
+fn cap_block_floats(triangles: usize, blk: usize) -> usize {
+    let end = ((blk + 1) * BLOCK).min(triangles);
+    (end - blk * BLOCK) * 12
+}
+
+/// Writes caps block `blk`'s records of `welded` into `out`
+/// ([`cap_block_floats`] floats).
+fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
+    let pos = &welded.positions[..];
+    let end = ((blk + 1) * BLOCK).min(welded.triangle_count());
+    let tris = &welded.triangles[3 * blk * BLOCK..3 * end];
+    let out: &mut [[f32; 4]] = bytemuck::cast_slice_mut(out);
+    let ahead = tris.get(3 * AHEAD..).unwrap_or(&[]);
+    for (i, (rec, c)) in out
+        .chunks_exact_mut(3)
+        .zip(tris.chunks_exact(3))
+        .enumerate()
+    {
+        if let Some(f) = ahead.get(3 * i..3 * i + 3) {
+            for &v in f {
+                prefetch(&pos[v as usize]);
             }
         }
+        for (slot, &v) in rec.iter_mut().zip(c) {
+            let p = pos[v as usize];
+            *slot = [p[0], p[1], p[2], 1.0];
+        }
+    }
+}
+
+/// The caps records of a welded mesh alone, as a [`PayloadSource`] of one
+/// section in the same units as the first units of [`Records`] (one per
+/// caps block): what `format::write_ahead` writes while the edges are
+/// still being made, since the caps need only the welded mesh.
+pub struct CapsRecords<'a> {
+    welded: &'a Welded,
+}
+
+impl<'a> CapsRecords<'a> {
+    /// The caps of `welded`.
+    pub fn new(welded: &'a Welded) -> Self {
+        CapsRecords { welded }
+    }
+}
+
+impl PayloadSource for CapsRecords<'_> {
+    fn units(&self) -> usize {
+        self.welded.triangle_count().div_ceil(BLOCK)
+    }
+
+    fn floats(&self, unit: usize, section: usize) -> usize {
+        match section {
+            0 => cap_block_floats(self.welded.triangle_count(), unit),
+            _ => 0,
+        }
+    }
+
+    fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
+        fill_caps(self.welded, unit, outs[0]);
     }
 }
 

@@ -70,6 +70,8 @@ pub struct Summary {
     pub caps_bytes: u64,
     /// Preamble, header and padding bytes.
     pub header_bytes: u64,
+    /// Of those, the header room's zeros (format 2.1, `format::header_room`).
+    pub header_room_bytes: u64,
     /// Uncompressed container bytes.
     pub container_bytes: u64,
     /// Bytes on disk.
@@ -161,6 +163,7 @@ impl Summary {
             sides_bytes,
             caps_bytes,
             header_bytes: h.payload_offset,
+            header_room_bytes: h.reserved,
             container_bytes: h.payload_offset + h.payload_len,
             file_bytes,
             paper_bytes: paper_bytes(stats.edges, stats.triangles, stats.max_fan),
@@ -260,7 +263,7 @@ impl Summary {
         );
         let _ = write!(
             o,
-            "output:  {}{}: header {}, sides {}, caps {}",
+            "output:  {}{}: header {}{}, sides {}, caps {}",
             human_bytes(self.file_bytes),
             if self.compressed {
                 format!(
@@ -271,6 +274,11 @@ impl Summary {
                 String::new()
             },
             human_bytes(self.header_bytes),
+            if self.header_room_bytes > 0 {
+                format!(" ({} of it room)", human_bytes(self.header_room_bytes))
+            } else {
+                String::new()
+            },
             human_bytes(self.sides_bytes),
             human_bytes(self.caps_bytes),
         );

@@ -135,7 +135,7 @@ fn inspect_rejects_damaged_files() {
     let with_header = |f: &dyn Fn(&mut svpack::format::Header)| {
         let mut h = svpack::format::read_file(&good).unwrap().header;
         f(&mut h);
-        let hb = bincode::serde::encode_to_vec(&h, bincode::config::legacy()).unwrap();
+        let hb = svpack::format::encode_header(&h).unwrap();
         assert_eq!(hb.len(), hlen);
         let mut b = bytes.clone();
         b[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
@@ -166,12 +166,12 @@ fn inspect_rejects_damaged_files() {
         (
             "version",
             patched(&|b| b[8] = 3),
-            "unsupported format version 3.0",
+            "unsupported format version 3.1",
         ),
         (
             "version_1",
             patched(&|b| b[8] = 1),
-            "unsupported format version 1.0",
+            "unsupported format version 1.1",
         ),
         ("header_bit", patched(&|b| b[30] ^= 1), "header checksum"),
         (

@@ -121,6 +121,12 @@ fn decode_per_spec(file: &[u8]) -> Vec<String> {
             sections.push((format!("sides k={k}"), 2 + k as usize, inst, off));
         }
     }
+    let reserved = c.u64();
+    kv("reserved", reserved.to_string());
+    assert!(
+        c.take(reserved as usize).iter().all(|&b| b == 0),
+        "reserved room not zero"
+    );
     assert_eq!(
         c.at,
         24 + hlen as usize,

@@ -23,7 +23,7 @@ fn patch_payload(path: &std::path::Path, f: impl Fn(&mut [u8], &svpack::format::
 fn fix_checksums(bytes: &mut [u8], h: &svpack::format::Header) {
     let mut h = h.clone();
     h.payload_crc32 = crc32fast::hash(&bytes[h.payload_offset as usize..]);
-    let hb = bincode::serde::encode_to_vec(&h, bincode::config::legacy()).unwrap();
+    let hb = svpack::format::encode_header(&h).unwrap();
     bytes[16..20].copy_from_slice(&crc32fast::hash(&hb).to_le_bytes());
     bytes[24..24 + hb.len()].copy_from_slice(&hb);
 }

@@ -18,7 +18,7 @@ const HEADER_LIMIT = 16 << 20;
  * a known major and a newer minor may carry header fields appended after the
  * ones read here (format-spec §7); they are skipped.
  */
-export const KNOWN_VERSIONS = { 2: 0 };
+export const KNOWN_VERSIONS = { 2: 1 };
 
 /** Position encodings (BuildOptions.positions, format 2.x). */
 export const ENCODINGS = {
@@ -153,6 +153,15 @@ export function parseHeader(bytes, start, end, major, minor) {
       m.buckets.push({ k: r.u32('bucket k'), instances: r.u64('bucket instances'), offset: r.u64('bucket offset'), length: r.u64('bucket length') });
     }
     h.meshes.push(m);
+  }
+  // 2.1 (§3.1): the header room, a count and that many zero bytes.
+  h.reserved = 0;
+  if (minor >= 1) {
+    const n = r.count('reserved', 1);
+    for (let j = 0; j < n; j++) {
+      if (r.u8('reserved room') !== 0) throw new Error('header: reserved room is not zero');
+    }
+    h.reserved = n;
   }
   // §7: a reader of minor m must find exactly header_len bytes of known fields
   // in a file of minor <= m; a newer minor may append fields, which we skip.

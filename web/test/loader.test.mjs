@@ -73,6 +73,7 @@ test('spec test vector decodes to the listed fields', () => {
     'meshes[0].position_scale': vec(m.positionScale),
     'meshes[0].stats.histogram': `[${m.stats.histogram.map((h) => `${h.opposites}:${h.edges}`).join(', ')}]`,
     'meshes[0].caps': `offset ${m.caps.offset}, length ${m.caps.length}, count ${m.caps.count}`,
+    reserved: String(f.reserved),
   };
   for (const [k, v] of Object.entries(m.stats)) if (k !== 'histogram') got[`meshes[0].stats.${k}`] = String(v);
   for (const b of m.buckets) got[`meshes[0].bucket k=${b.k}`] = `instances ${b.instances}, offset ${b.offset}, length ${b.length}`;
@@ -116,7 +117,7 @@ test('corrupt files are rejected with a reason', () => {
   const cases = [
     ['bad magic', patched((b) => { b[0] = 0x54; }), /bad magic/],
     ['zstd', patched((b) => { b.set([0x28, 0xb5, 0x2f, 0xfd]); }), /zstd -d/],
-    ['unknown major', patched((b, dv) => { dv.setUint16(8, 9, true); }), new RegExp(`9\\.0.*${Object.keys(KNOWN_VERSIONS).at(-1)}\\.0`)],
+    ['unknown major', patched((b, dv) => { dv.setUint16(8, 9, true); }), new RegExp(`9\\.\\d+.*${Object.keys(KNOWN_VERSIONS).at(-1)}\\.${Object.values(KNOWN_VERSIONS).at(-1)}`)],
     ['header bit flip', patched((b) => { b[40] ^= 1; }), /header checksum mismatch/],
     ['payload bit flip', patched((b, dv) => { b[b.length - 3] ^= 1; }), /payload checksum mismatch/],
     ['truncated', fresh().slice(0, 700), /truncated/],
@@ -135,6 +136,21 @@ test('corrupt files are rejected with a reason', () => {
     const optionsAt = 24 + 8 + 8 + 4 + len(f.generator) + len(f.input.fileName) + len(f.input.format) + 8 + 32;
     assert.equal(new DataView(fresh()).getUint32(optionsAt, true), f.options.maxMult);
     cases.push(['unknown encoding', patched((b, dv) => { b[optionsAt + 5] = 7; fixHeaderCrc(b, dv); }), /unknown position encoding 7/]);
+  }
+  if (f.versionMajor === 2 && f.versionMinor >= 1) {
+    // §3.1: the room's count is the header's last 8 bytes. One room byte
+    // more, taken from the padding before the payload: a zero loads, a
+    // nonzero is rejected.
+    const hl = new DataView(fresh()).getUint32(12, true);
+    assert.ok(24 + hl < f.payloadOffset, 'the vector has padding after its header');
+    const room = (byte) => patched((b, dv) => {
+      dv.setUint32(12, hl + 1, true);
+      dv.setBigUint64(24 + hl - 8, 1n, true);
+      b[24 + hl] = byte;
+      fixHeaderCrc(b, dv);
+    });
+    assert.equal(load(room(0)).reserved, 1);
+    cases.push(['nonzero room', room(1), /reserved room is not zero/]);
   }
   for (const [name, buf, re] of cases) {
     assert.throws(() => load(buf), re, name);
