@@ -806,8 +806,9 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
 }
 
 /// Reserves the disk blocks of bytes `from..size` of a new `size`-byte
-/// `file` before they are written, on ext4 and XFS only (`fallocate`); anywhere else, or if the
-/// call fails, the writes allocate as they go, as without it.
+/// `file` before they are written, on ext4 and XFS only (`fallocate`);
+/// anywhere else, or if the call fails, the writes allocate as they go, as
+/// without it.
 ///
 /// Why: with no blocks behind it, every 4 KiB block a buffered write covers
 /// is reserved one by one (ext4's delayed allocation); with the blocks
@@ -879,11 +880,6 @@ impl WrittenAhead {
     /// Number of units written.
     pub fn units(&self) -> usize {
         self.pieces.len()
-    }
-
-    /// Where the pieces start in the file (the first unit's offset), if any.
-    pub fn offset(&self) -> Option<u64> {
-        self.pieces.first().map(|p| p.0)
     }
 }
 
