@@ -231,7 +231,10 @@ fn ms(i: Instant) -> f64 {
 /// Weld and topology of a checked soup, timed into `t`.
 fn weld_and_topology(soup: &Soup, t: &mut Timings, stage: StageCallback<'_>) -> (Welded, Edges) {
     let welded = timed_weld(soup, true, t, stage);
-    let edges = timed_topology(&welded, false, t, stage);
+    stage("topology");
+    let i = Instant::now();
+    let edges = topology::build_edges(&welded.triangles, welded.positions.len());
+    t.topology += ms(i);
     (welded, edges)
 }
 
@@ -247,27 +250,6 @@ fn timed_weld(soup: &Soup, sources: bool, t: &mut Timings, stage: StageCallback<
     };
     t.weld += ms(i);
     welded
-}
-
-/// Edges, timed into `t`; without the opposite vertices' triangles
-/// (`Edges::opp_tri`) when `opposites_only`. (Their statistics come from
-/// the layout's plan, `Plan::edge_stats`.)
-fn timed_topology(
-    welded: &Welded,
-    opposites_only: bool,
-    t: &mut Timings,
-    stage: StageCallback<'_>,
-) -> Edges {
-    stage("topology");
-    let i = Instant::now();
-    let (tris, n) = (&welded.triangles, welded.positions.len());
-    let edges = if opposites_only {
-        topology::build_edges_opposites_only(tris, n)
-    } else {
-        topology::build_edges(tris, n)
-    };
-    t.topology += ms(i);
-    edges
 }
 
 /// The header's statistics of one mesh (`input_triangles`: the soup's
@@ -493,11 +475,13 @@ pub fn build_file_with(
         },
         ..mesh_header.clone()
     };
-    let room = format::header_room(&Header {
-        meshes: vec![early.clone()],
-        ..header.clone()
-    })?;
-    let ahead_wanted = !cfg.compress && room.is_some() && rayon::current_num_threads() >= 2;
+    let ahead_wanted = !cfg.compress
+        && rayon::current_num_threads() >= 2
+        && format::header_room(&Header {
+            meshes: vec![early.clone()],
+            ..header.clone()
+        })?
+        .is_some();
     let (edges, ahead) = rayon::join(
         || topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         || {

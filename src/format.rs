@@ -429,8 +429,8 @@ pub fn encode_header(header: &Header) -> Result<Vec<u8>> {
 }
 
 /// Fewest kept triangles for which a writer keeps header room
-/// ([`header_room`]). Smaller files gain nothing from writing their caps
-/// early.
+/// ([`header_room`]). Below it the caps are under 3 MiB, whose copy (about
+/// half a millisecond here) is not worth a header longer than it has to be.
 pub const ROOM_MIN_TRIANGLES: u64 = 1 << 16;
 
 /// Histogram entries (distinct opposite counts) the header room holds. The

@@ -67,7 +67,7 @@ fn fix_header_crc(bytes: &mut [u8]) {
 
 /// Caught: the writer without `reserve_room` (no room on the 22-count
 /// mesh), and the early caps kept although the header outgrew its room (the
-/// 72-count mesh's two-thread file then fails its payload CRC).
+/// 72-count mesh's two-thread file then differs from the one-thread file).
 #[test]
 fn large_files_keep_room_and_are_the_same_bytes_on_any_thread_count() {
     let tmp = tempfile::tempdir().unwrap();
