@@ -16,8 +16,8 @@ the memory the run before freed, still backed, and rested runs get cold
 memory, as a build started on its own does (`alloc::cold_memory_seen`).
 Prints,
 per binary and thread count, the fastest and median whole build, time after parsing
-(weld + topology + layout + write), of layout + write, and the largest peak
-memory; checks that both binaries wrote the same bytes in every run (with
+(weld + topology + layout + write), weld, topology, layout + write, and the
+largest peak memory; checks that both binaries wrote the same bytes in every run (with
 --allow-different, for versions whose headers are known to differ, it only
 says how many runs differed).
 """
@@ -41,7 +41,7 @@ def build(binary, inp, out, threads, replace=False, rest=0.0):
     d = json.loads(run.stdout)
     t = d["timings_ms"]
     return (t["total"] - t["load"], t["layout"] + t["write"], d["peak_memory_bytes"] / 2**20,
-            t["total"])
+            t["total"], t["weld"], t["topology"])
 
 
 def main():
@@ -81,15 +81,15 @@ def main():
                     different += 1
     if allow_different:
         print(f"{different} of {2 * rounds} pairs of outputs differed")
-    print("| binary | threads | whole build, fastest / median (ms) | after parsing, fastest / median (ms) | layout + write, fastest / median (ms) | peak memory (MiB) |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("| binary | threads | whole build, fastest / median (ms) | after parsing, fastest / median (ms) "
+          "| weld | topology | layout + write | peak memory (MiB) |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for (name, t), v in sorted(res.items(), key=lambda kv: (kv[0][1], kv[0][0] != "old")):
-        after = sorted(x[0] for x in v)
-        lw = sorted(x[1] for x in v)
-        whole = sorted(x[3] for x in v)
-        print(f"| {name} | {t} | {whole[0]:.1f} / {whole[len(whole) // 2]:.1f} "
-              f"| {after[0]:.1f} / {after[len(after) // 2]:.1f} "
-              f"| {lw[0]:.1f} / {lw[len(lw) // 2]:.1f} | {max(x[2] for x in v):.1f} |")
+        def col(i):
+            x = sorted(run[i] for run in v)
+            return f"{x[0]:.1f} / {x[len(x) // 2]:.1f}"
+        print(f"| {name} | {t} | {col(3)} | {col(0)} | {col(4)} | {col(5)} | {col(1)} "
+              f"| {max(x[2] for x in v):.1f} |")
 
 
 if __name__ == "__main__":
