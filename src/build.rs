@@ -56,13 +56,16 @@ pub struct Timings {
     pub load: f64,
     /// Quantising (unorm16 only) and welding.
     pub weld: f64,
-    /// Edges and opposite vertices, and their statistics.
+    /// Edges and opposite vertices, and their statistics; with two threads
+    /// or more on an uncompressed file with header room
+    /// (`format::header_room`), also the caps, written beside the edges.
     pub topology: f64,
     /// Buckets and splitting (the counting pass, [`Plan`]); with
     /// `--compress` also filling the sides and caps buffers.
     pub layout: f64,
     /// Encoding and writing the file. Without `--compress` this includes
-    /// filling the sides and caps records, which go straight into the file
+    /// filling the sides and caps records (the caps unless written under
+    /// `topology`), which go straight into the file
     /// (`format::write_file_streamed`); with it, compressing whole buffers.
     pub write: f64,
     /// The whole build.
