@@ -490,13 +490,14 @@ pub fn header_room(header: &Header) -> Result<Option<usize>> {
 
 /// Sets `header.reserved` so that the header is [`header_room`] bytes long
 /// where the file keeps room and the header fits in it, and to 0 elsewhere.
-fn reserve_room(header: &mut Header) -> Result<()> {
+/// Returns the header's encoded length, room included.
+fn reserve_room(header: &mut Header) -> Result<usize> {
     header.reserved = 0;
+    let len = encode_header(header)?.len();
     if let Some(room) = header_room(header)? {
-        let len = encode_header(header)?.len();
         header.reserved = room.saturating_sub(len) as u64;
     }
-    Ok(())
+    Ok(len + header.reserved as usize)
 }
 
 /// Fills every section's offset, length and count and the payload's offset
@@ -509,8 +510,7 @@ fn place_sections(header: &mut Header, floats: &[Vec<u64>]) -> Result<usize> {
         .map_err(Error::Other)?
         .vec4_bytes();
     // One encoding with zeros tells where the payload starts.
-    reserve_room(header)?;
-    let probe_len = encode_header(header)?.len();
+    let probe_len = reserve_room(header)?;
     let payload_offset = align_up((PREAMBLE_LEN + probe_len) as u64);
     let mut offset = payload_offset;
     for (mh, f) in header.meshes.iter_mut().zip(floats) {
