@@ -1,6 +1,6 @@
 //! Times single steps of a build or of `verify` that the whole-command
 //! benchmarks (`benches/compare_binaries.py`, `benches/compare_verify.py`)
-//! only see summed: the figures the README's ninth round quotes for them.
+//! only see summed: the figures benches/ROUNDS.md's ninth round quotes for them.
 //! Each step runs several times in one process and the fastest time is
 //! printed; build it at two commits and alternate the binaries to compare.
 //!
@@ -174,7 +174,7 @@ fn passes(path: &Path) {
 /// most (3.7–4.0 → 4.6–6.8 ms; 1.7–2.4 ms either way without the
 /// gathers). The copy into the page cache carries the whole output through
 /// the caches, so the caps' scattered reads of the position table (5.2 MB)
-/// go to memory instead of L2 and L3 (the README's fifteenth round).
+/// go to memory instead of L2 and L3 (benches/ROUNDS.md, fifteenth round).
 fn fill_write(path: &Path) {
     use std::os::unix::fs::FileExt;
     use svpack::format::PayloadSource;

@@ -332,7 +332,7 @@ pub struct HugePageAlloc;
 /// page and 384 small ones (`AnonHugePages` in `/proc/self/smaps`, kernel
 /// 6.18); rounded up to 4 MiB it gets two. On the dragon the weld and
 /// topology stages allocate a dozen buffers of 2–14 MiB, so most of their
-/// first touches were small-page faults (README, "Eighth round"). The cost
+/// first touches were small-page faults (benches/ROUNDS.md, "Eighth round"). The cost
 /// is address space, and at most the zeroing of one huge page per buffer
 /// where a buffer's tail reaches into it.
 #[inline]

@@ -413,8 +413,8 @@ pub fn build_file_with(
     // What the rest of the build does not read is freed before topology
     // allocates, which then reuses those pages: the soup (the welded mesh
     // replaces it). Faulting in pages the process has never touched is the
-    // slow part of a fresh buffer, especially in a VM (README, "Fifth
-    // round").
+    // slow part of a fresh buffer, especially in a VM (benches/ROUNDS.md,
+    // "Fifth round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
     // The headers, with what the edges decide (statistics, buckets) and
     // the bounds still to come; their length is all `write_ahead` needs.
@@ -467,7 +467,7 @@ pub fn build_file_with(
     // header room (`format::header_room`) starts its payload at an offset
     // the edges do not change (unless its mesh has more distinct opposite
     // counts than the room holds: then the writer writes the caps again).
-    // Why: README, "Eighteenth round".
+    // Why: benches/ROUNDS.md, "Eighteenth round".
     stage("topology");
     let i = Instant::now();
     let triangles = welded.triangle_count() as u64;

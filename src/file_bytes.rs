@@ -5,8 +5,8 @@
 //! machine (a VM whose host hands pages out slowly) zeroes at as little as
 //! 0.4 GB/s. Mapped with `MAP_POPULATE`, the page cache's own pages are the
 //! bytes: the 16 MB `dragon.glb` opened and read in 11–15 ms, mapped in
-//! 1.0 ms (a C probe, fresh process each time, 3 runs; README, "Ninth
-//! round"). Small files are read: a mapping costs more than it saves there.
+//! 1.0 ms (a C probe, fresh process each time, 3 runs; benches/ROUNDS.md,
+//! "Ninth round"). Small files are read: a mapping costs more than it saves there.
 //!
 //! Like any reader of a mapped file, this assumes no other process rewrites
 //! or truncates the file in place while it is mapped (svpack itself never

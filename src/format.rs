@@ -449,8 +449,8 @@ pub const ROOM_HISTOGRAM_ENTRIES: usize = 64;
 /// is padded to it with [`Header::reserved`] (about 0.9 KB of zeros on the
 /// dragon), a longer one is written as it is. Why: with two threads the
 /// caps (a third of the file) are written while the edges are being made,
-/// which needs to know where the payload starts (README, "Eighteenth
-/// round").
+/// which needs to know where the payload starts (benches/ROUNDS.md,
+/// "Eighteenth round").
 pub fn header_room(header: &Header) -> Result<Option<usize>> {
     let [mesh] = header.meshes.as_slice() else {
         return Ok(None);
@@ -897,7 +897,7 @@ impl WrittenAhead {
 /// was one thread copying the whole output while the other filled units
 /// and then waited. Copying the caps (a third of the dragon's output)
 /// while the other thread makes the edges takes them off that serial path
-/// (README, "Eighteenth round"). Should the final header put the caps
+/// (benches/ROUNDS.md, "Eighteenth round"). Should the final header put the caps
 /// elsewhere (one too long for its room: a mesh with more than
 /// [`ROOM_HISTOGRAM_ENTRIES`] distinct opposite counts), the writer
 /// discards these pieces and writes the file from the start.
@@ -1253,7 +1253,7 @@ impl std::fmt::Debug for Floats {
 /// ([`FileBytes::Mapped`], see [`crate::file_bytes`] for the contract), and
 /// [`SvpkFile::floats`] returns views of their f32 sections instead of
 /// copying them: the dragon's 125 MB output read and checked in 21–22 ms
-/// against 51–365 ms read (README, "Eighth round").
+/// against 51–365 ms read (benches/ROUNDS.md, "Eighth round").
 pub fn read_file(path: &Path) -> Result<SvpkFile> {
     let bytes = crate::file_bytes::read_or_map(path).map_err(|e| Error::io(path, e))?;
     match bytes {

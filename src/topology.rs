@@ -74,7 +74,7 @@ impl Edges {
 ///    scene, 1 and 2 threads, in an interleaved comparison not kept in the
 ///    repo). Pass 2 also prefetches the list slots it will write `AHEAD`
 ///    triangles on: 12.9–13.2 → 10.9–11.1 ms on the dragon, one thread
-///    (local timers, README "Ninth round").
+///    (local timers, benches/ROUNDS.md, "Ninth round").
 /// 2. **List** every triangle under its `lo` and `mid` by the pair of its
 ///    other two corners: `[mid, hi]` under `lo`, `[hi, lo]` under `mid`
 ///    (8 bytes per listing, 2 per triangle; the pair's order tells the two
@@ -106,14 +106,14 @@ impl Edges {
 /// that writes and reads back 16 bytes per half-edge, 42 MB of fresh memory
 /// on the 871k-triangle dragon; the listing is 16 bytes per triangle
 /// (14 MB). On the dragon the CLI's topology stage went from 86.9 to 61.6 ms
-/// on one thread (see the README).
+/// on one thread (benches/ROUNDS.md, "Fourth round").
 ///
 /// Why pairs and not triangle ids (4 bytes per listing, the fourth round's
 /// method): with ids, pass 3 gathered every listed triangle from the
 /// triangle table, one scattered read per listing (1.7M on the dragon,
 /// prefetched). The pairs cost 7 MB more writes in pass 2 and turn pass 3
 /// into a sequential read: 46.5–47.6 → 42.1–42.5 ms on one thread, 26.3–28.5
-/// → 24.2–25.4 ms on two (README, "Eighth round").
+/// → 24.2–25.4 ms on two (benches/ROUNDS.md, "Eighth round").
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
