@@ -485,16 +485,47 @@ pub fn build_file_with(
             ..header.clone()
         })?
         .is_some();
-    let (edges, ahead) = rayon::join(
-        || topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
+    // What is left of the input's digest, hashed a slice at a time by
+    // threads waiting to write (here, or while the file is written ahead).
+    let digest = load::DigestSlices::new(digest);
+    let ahead_file = ahead_wanted
+        .then(|| format::AheadFile::new(output, header.clone(), early))
+        .transpose()?;
+    // With a file to write ahead into, the side blocks are copied while the
+    // edges are made (`layout::write_sides_ahead`) on the thread that
+    // copied the caps.
+    let mut sides_ahead = Ok(());
+    let (edges, caps_ahead) = rayon::join(
+        || match &ahead_file {
+            Some(file) => {
+                let mut consumer = |feed: &topology::EmitFeed| {
+                    sides_ahead =
+                        layout::write_sides_ahead(feed, &welded, cfg.max_mult, file, &|| {
+                            digest.step()
+                        });
+                };
+                topology::build_edges_opposites_only_fed(
+                    &welded.triangles,
+                    welded.positions.len(),
+                    &mut consumer,
+                )
+            }
+            None => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
+        },
         || {
-            ahead_wanted.then(|| {
+            ahead_file.as_ref().map(|file| {
                 let caps = layout::CapsRecords::new(&welded);
-                format::write_ahead(output, header.clone(), early, &caps)
+                file.reserve(0, file.sides_offset())?;
+                let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
+                file.write(&caps, 0, 0, file.caps_offset(), &mut bufs, &|| {
+                    digest.step()
+                })
             })
         },
     );
-    let ahead = ahead.transpose()?;
+    caps_ahead.transpose()?;
+    sides_ahead?;
+    let ahead = ahead_file.map(format::AheadFile::finish);
     timings.topology += ms(i);
     stage("layout");
     let i = Instant::now();
@@ -547,7 +578,6 @@ pub fn build_file_with(
         }
         None => {
             let records = plan.records(&welded, &edges);
-            let digest = load::DigestSlices::new(digest);
             format::write_file_streamed_finishing(
                 output,
                 header,

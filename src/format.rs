@@ -867,72 +867,185 @@ pub fn write_file_streamed(
     write_file_streamed_finishing(path, header, mesh, source, None, &|| false, move || input)
 }
 
-/// The first units of a payload, already written into the temp file that
-/// will become the output ([`write_ahead`]), with where each went and its
-/// CRC.
-pub struct WrittenAhead {
-    tmp: tempfile::NamedTempFile,
-    /// Per unit: its section-0 piece's file offset, byte length and CRC.
-    pieces: Vec<(u64, u64, crc32fast::Hasher)>,
+/// One unit's piece of one section written ahead ([`AheadFile`]): the
+/// unit, the section, where it went, its byte length and CRC.
+struct Piece {
+    unit: usize,
+    section: usize,
+    at: u64,
+    len: u64,
+    crc: crc32fast::Hasher,
 }
 
-impl WrittenAhead {
-    /// Number of units written.
-    pub fn units(&self) -> usize {
-        self.pieces.len()
-    }
-}
-
-/// Writes the units of `source`, a payload with one section (the caps),
-/// into a new temp file beside `path`, one after the other on the calling
-/// thread, at the offsets a file with `header` and `mesh` puts them:
-/// the start of a [`write_file_streamed_finishing`] of the same caps that
-/// can run before the side buckets are known. `mesh` needs its name and
-/// `stats.triangles` only: it is placed as a file with header room
-/// ([`header_room`]), whose payload starts at the same offset whatever its
-/// edges.
+/// The temp file that will become the output, with units of its payload
+/// written before the whole payload is known ([`AheadFile::new`]), at the
+/// offsets a file with header room ([`header_room`]) puts them: the caps
+/// while the edges are being made, and side blocks while the rest of the
+/// edges are. [`write_file_streamed_finishing`] keeps every piece that
+/// went where the final file puts it and writes the others again.
 ///
 /// Why: on ext4, writes into one file take the file's lock in turn, so the
 /// copy into the page cache is serial: with two threads, the write stage
 /// was one thread copying the whole output while the other filled units
 /// and then waited. Copying the caps (a third of the dragon's output)
 /// while the other thread makes the edges takes them off that serial path
-/// (benches/ROUNDS.md, "Eighteenth round"). Should the final header put the caps
-/// elsewhere (one too long for its room: a mesh with more than
-/// [`ROOM_HISTOGRAM_ENTRIES`] distinct opposite counts), the writer
-/// discards these pieces and writes the file from the start.
-pub fn write_ahead(
-    path: &Path,
-    mut header: Header,
-    mesh: MeshHeader,
-    source: &dyn PayloadSource,
-) -> Result<WrittenAhead> {
-    let enc = header.options.encoding().map_err(Error::Other)?;
-    let per_float = enc.vec4_bytes() / 4;
-    let units = source.units();
-    let mut floats = vec![0u64; 1 + mesh.buckets.len()];
-    floats[0] = (0..units).map(|u| source.floats(u, 0) as u64).sum();
-    header.meshes = vec![mesh];
-    place_sections(&mut header, std::slice::from_ref(&floats))?;
-    let caps = header.meshes[0].caps;
-    let tmp = temp_beside(path)?;
-    let file = tmp.as_file();
-    let end = caps.offset + caps.length;
-    file.set_len(end).map_err(|e| Error::io(path, e))?;
-    preallocate(file, 0, end);
-    let widest = (0..units).map(|u| source.floats(u, 0)).max().unwrap_or(0);
-    let mut bufs = unit_buffers(widest);
-    let mut at = caps.offset;
-    let mut pieces = Vec::with_capacity(units);
-    for u in 0..units {
-        let len = source.floats(u, 0) as u64 * per_float;
-        let write = |bytes: &[u8], offset: u64| write_at(file, bytes, offset);
-        let mut crc = write_unit(source, u, 1, enc, &[at], &mut bufs, &write)
-            .map_err(|e| Error::io(path, e))?;
-        pieces.push((at, len, crc.pop().unwrap_or_default()));
-        at += len;
+/// (benches/ROUNDS.md, "Eighteenth round"), and the sides' blocks copied
+/// as the edges are finished take most of the rest ("Nineteenth round").
+pub struct AheadFile {
+    tmp: tempfile::NamedTempFile,
+    path: std::path::PathBuf,
+    enc: Encoding,
+    caps_offset: u64,
+    sides_offset: u64,
+    pieces: std::sync::Mutex<Vec<Piece>>,
+    /// Set while a thread writes: another then spins instead of blocking
+    /// on the file's lock (as [`write_file_streamed_finishing`] does).
+    writing: std::sync::atomic::AtomicBool,
+    /// Held while the file's length changes.
+    resizing: std::sync::Mutex<()>,
+}
+
+/// A thread's buffers for [`AheadFile::write`], reused from call to call.
+pub struct UnitBuffers((Vec<f32>, Vec<u8>));
+
+impl UnitBuffers {
+    /// Buffers for units of up to `floats` floats (larger ones grow them).
+    pub fn new(floats: usize) -> Self {
+        UnitBuffers(unit_buffers(floats))
     }
-    Ok(WrittenAhead { tmp, pieces })
+}
+
+/// The pieces of an [`AheadFile`], for the writer that finishes it.
+pub struct WrittenAhead {
+    tmp: tempfile::NamedTempFile,
+    pieces: Vec<Piece>,
+}
+
+impl WrittenAhead {
+    /// Number of pieces written.
+    pub fn pieces(&self) -> usize {
+        self.pieces.len()
+    }
+}
+
+impl AheadFile {
+    /// A new temp file beside `path` for a one-mesh file with `header` and
+    /// `mesh`, of which only the name and `stats.triangles` are used: the
+    /// file is placed as one with header room, whose payload starts at the
+    /// same offset whatever its edges.
+    pub fn new(path: &Path, mut header: Header, mesh: MeshHeader) -> Result<AheadFile> {
+        let enc = header.options.encoding().map_err(Error::Other)?;
+        let mut floats = vec![0u64; 1 + mesh.buckets.len()];
+        floats[0] = mesh.stats.triangles * 12;
+        header.meshes = vec![mesh];
+        place_sections(&mut header, std::slice::from_ref(&floats))?;
+        let caps = header.meshes[0].caps;
+        Ok(AheadFile {
+            tmp: temp_beside(path)?,
+            path: path.to_path_buf(),
+            enc,
+            caps_offset: caps.offset,
+            // Where the first bucket starts: right after the caps.
+            sides_offset: align_up(caps.offset + caps.length),
+            pieces: Default::default(),
+            writing: Default::default(),
+            resizing: Default::default(),
+        })
+    }
+
+    /// Where the caps start.
+    pub fn caps_offset(&self) -> u64 {
+        self.caps_offset
+    }
+
+    /// Where the first side bucket starts, whatever its k.
+    pub fn sides_offset(&self) -> u64 {
+        self.sides_offset
+    }
+
+    /// Bytes per vec4 of the file's encoding.
+    pub fn vec4_bytes(&self) -> u64 {
+        self.enc.vec4_bytes()
+    }
+
+    /// Makes the file at least `end` bytes long and reserves the blocks of
+    /// bytes `from..end` (`fallocate` on ext4 and XFS), as the finishing writer does for
+    /// the rest. Why: writes into reserved blocks only look them up.
+    pub fn reserve(&self, from: u64, end: u64) -> Result<()> {
+        let _one = self.resizing.lock().unwrap_or_else(|e| e.into_inner());
+        let file = self.tmp.as_file();
+        let io = |e| Error::io(&self.path, e);
+        if file.metadata().map_err(io)?.len() < end {
+            file.set_len(end).map_err(io)?;
+        }
+        preallocate(file, from, end);
+        Ok(())
+    }
+
+    /// Writes every unit of `source`, a payload of one section, one after
+    /// the other from byte `at`, on the calling thread with its `bufs`, as
+    /// units `first_unit..` of section `section` of the final payload;
+    /// returns where the last ended. A thread that finds another writing
+    /// waits for it with `side` work (as [`write_file_streamed_finishing`]
+    /// does), then by spinning, not on the file's lock (a sleep and a
+    /// wake-up each time).
+    pub fn write(
+        &self,
+        source: &dyn PayloadSource,
+        first_unit: usize,
+        section: usize,
+        at: u64,
+        bufs: &mut UnitBuffers,
+        side: &dyn Fn() -> bool,
+    ) -> Result<u64> {
+        use std::sync::atomic::Ordering::{Acquire, Relaxed, Release};
+        let per_float = self.enc.vec4_bytes() / 4;
+        let file = self.tmp.as_file();
+        let write = |bytes: &[u8], offset: u64| {
+            while self
+                .writing
+                .compare_exchange_weak(false, true, Acquire, Relaxed)
+                .is_err()
+            {
+                if !side() {
+                    std::hint::spin_loop();
+                }
+            }
+            let written = write_at(file, bytes, offset);
+            self.writing.store(false, Release);
+            written
+        };
+        let mut pieces = Vec::with_capacity(source.units());
+        let mut at = at;
+        for u in 0..source.units() {
+            let len = source.floats(u, 0) as u64 * per_float;
+            let mut crc = write_unit(source, u, 1, self.enc, &[at], &mut bufs.0, &write)
+                .map_err(|e| Error::io(&self.path, e))?;
+            pieces.push(Piece {
+                unit: first_unit + u,
+                section,
+                at,
+                len,
+                crc: crc.pop().unwrap_or_default(),
+            });
+            at += len;
+        }
+        self.pieces
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .extend(pieces);
+        Ok(at)
+    }
+
+    /// The file and what was written into it.
+    pub fn finish(self) -> WrittenAhead {
+        let mut pieces = self.pieces.into_inner().unwrap_or_else(|e| e.into_inner());
+        pieces.sort_by_key(|p| (p.unit, p.section));
+        WrittenAhead {
+            tmp: self.tmp,
+            pieces,
+        }
+    }
 }
 
 /// A thread's buffers for [`write_unit`]: the floats, large enough for
@@ -1052,23 +1165,45 @@ pub fn write_file_streamed_finishing(
         }
     }
 
-    // The units written ahead, if each went exactly where this file puts
-    // it (one section-0 piece and nothing else).
-    let ahead = ahead.filter(|a| {
-        a.units() <= units
-            && a.pieces.iter().enumerate().all(|(u, &(at, len, _))| {
-                starts[u * sections] == at
-                    && source.floats(u, 0) as u64 * per_float == len
-                    && (1..sections).all(|s| source.floats(u, s) == 0)
-            })
-    });
+    // The pieces written ahead that went exactly where this file puts them
+    // (a unit's only non-empty piece, at its offset and length); a unit is
+    // written here unless it has one. Anything written elsewhere is cut off
+    // the file first (from the lowest such byte on, with every piece past
+    // it), so that no stale byte stays in a gap the writer leaves as zeros.
     let size = container_len(&header);
-    let (tmp, done, from) = match ahead {
+    let mut done: Vec<Option<crc32fast::Hasher>> = (0..units).map(|_| None).collect();
+    let (tmp, from) = match ahead {
         Some(a) => {
-            let from = a.pieces.last().map_or(0, |p| p.0 + p.1);
-            (a.tmp, a.pieces.into_iter().map(|p| p.2).collect(), from)
+            let fits = |p: &Piece| {
+                p.unit < units
+                    && p.section < sections
+                    && starts[p.unit * sections + p.section] == p.at
+                    && source.floats(p.unit, p.section) as u64 * per_float == p.len
+                    && (0..sections).all(|s| s == p.section || source.floats(p.unit, s) == 0)
+            };
+            let cut = a
+                .pieces
+                .iter()
+                .filter(|p| !fits(p))
+                .map(|p| p.at)
+                .min()
+                .unwrap_or(u64::MAX);
+            let mut from = 0;
+            for p in a.pieces {
+                if fits(&p) && p.at + p.len <= cut && done[p.unit].is_none() {
+                    from = from.max(p.at + p.len);
+                    done[p.unit] = Some(p.crc);
+                }
+            }
+            if cut != u64::MAX {
+                a.tmp
+                    .as_file()
+                    .set_len(cut)
+                    .map_err(|e| Error::io(path, e))?;
+            }
+            (a.tmp, from)
         }
-        None => (temp_beside(path)?, Vec::new(), 0),
+        None => (temp_beside(path)?, 0),
     };
     let file = tmp.as_file();
     file.set_len(size).map_err(|e| Error::io(path, e))?;
@@ -1077,7 +1212,8 @@ pub fn write_file_streamed_finishing(
     // the kernel then serialises them as before).
     let writing = AtomicBool::new(false);
     // Each thread's fill buffer holds the largest unit.
-    let widest = (done.len()..units)
+    let widest = (0..units)
+        .filter(|&u| done[u].is_none())
         .map(|u| (0..sections).map(|s| source.floats(u, s)).sum::<usize>())
         .max()
         .unwrap_or(0);
@@ -1094,26 +1230,36 @@ pub fn write_file_streamed_finishing(
         writing.store(false, Relaxed);
         written
     };
-    let mut crcs: Vec<Vec<crc32fast::Hasher>> = done.into_iter().map(|h| vec![h]).collect();
-    crcs.extend(
-        (crcs.len()..units)
-            .into_par_iter()
-            .map_init(
-                || unit_buffers(widest),
-                |bufs, u| {
+    // Per unit, its pieces' CRCs (a unit written ahead has its one piece's,
+    // in its section's place).
+    let crcs: Vec<Vec<crc32fast::Hasher>> = done
+        .into_par_iter()
+        .enumerate()
+        .map_init(
+            || unit_buffers(widest),
+            |bufs, (u, done)| match done {
+                Some(crc) => {
+                    let s = (0..sections)
+                        .find(|&s| source.floats(u, s) > 0)
+                        .unwrap_or(0);
+                    let mut hashes = vec![crc32fast::Hasher::new(); s];
+                    hashes.push(crc);
+                    Ok(hashes)
+                }
+                None => {
                     let starts = &starts[u * sections..(u + 1) * sections];
                     write_unit(source, u, sections, enc, starts, bufs, &write)
                         .map_err(|e| Error::io(path, e))
-                },
-            )
-            .collect::<Result<Vec<_>>>()?,
-    );
+                }
+            },
+        )
+        .collect::<Result<Vec<_>>>()?;
     (header.input.bytes, header.input.sha256) = input();
     // The payload's CRC: every section's pieces in unit order, then the
     // section's zero padding (as `write_records` writes it).
     let mut crc = crc32fast::Hasher::new();
     for (s, &f) in floats.iter().enumerate() {
-        // (A unit written ahead has its one section's CRC only.)
+        // (A unit written ahead has CRCs up to its one section only.)
         for unit in crcs.iter().filter_map(|u| u.get(s)) {
             crc.combine(unit);
         }

@@ -17,7 +17,7 @@
 
 use crate::format::PayloadSource;
 use crate::hint::prefetch;
-use crate::topology::Edges;
+use crate::topology::{EdgeSlices, Edges, EmitFeed};
 use crate::weld::Welded;
 
 /// Largest `--max-mult` accepted: the sides shader needs 3 + K vertex
@@ -232,52 +232,64 @@ impl Plan {
     /// exactly [`Plan::side_block_floats`]`(blk, k)` floats (`outs` has
     /// K + 1 entries, entry 0 unused).
     pub fn fill_sides(&self, welded: &Welded, edges: &Edges, blk: usize, outs: &mut [&mut [f32]]) {
-        let k_max = self.max_mult as usize;
-        let pos = &welded.positions;
-        let mut at = [0usize; MAX_MAX_MULT as usize + 1];
-        for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
-            if let (Some(&b), Some(&s)) = (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD)) {
-                prefetch(&pos[b as usize]);
-                for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
-                    prefetch(&pos[o as usize]);
-                }
-            }
-            let a = pos[edges.a[e] as usize];
-            let b = pos[edges.b[e] as usize];
-            let opp = edges.opposites(e);
-            if let ([o0, o1], true) = (opp, k_max >= 2) {
-                // An edge of two triangles, almost every edge of a closed
-                // mesh: one record of k = 2, written whole. The general
-                // loop below took the dragon's sides 6.5 ms (7.0 with the
-                // caches emptied first), this 5.1 (5.7); a local probe.
-                let (o0, o1) = (pos[*o0 as usize], pos[*o1 as usize]);
-                let out = &mut outs[2][at[2]..at[2] + 16];
-                at[2] += 16;
-                out.copy_from_slice(&[
-                    a[0], a[1], a[2], 2.0, b[0], b[1], b[2], 2.0, o0[0], o0[1], o0[2], 1.0, o1[0],
-                    o1[1], o1[2], 1.0,
-                ]);
-                continue;
-            }
-            let n = opp.len() as f32;
-            for chunk in opp.chunks(k_max) {
-                let k = chunk.len();
-                let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
-                at[k] += (2 + k) * 4;
-                out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
-                out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
-                for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
-                    let o = pos[o as usize];
-                    slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
-                }
-            }
-        }
+        fill_sides(self.max_mult, welded, edges.slices(), blk, outs);
     }
 
     /// Writes caps block `blk`'s records into `out`
     /// ([`Plan::cap_block_floats`]`(blk)` floats).
     pub fn fill_caps(&self, welded: &Welded, blk: usize, out: &mut [f32]) {
         fill_caps(welded, blk, out);
+    }
+}
+
+/// [`Plan::fill_sides`] for `max_mult` K, from `edges` as slices (all of
+/// them, or a finished prefix that holds block `blk`).
+fn fill_sides(
+    max_mult: u32,
+    welded: &Welded,
+    edges: EdgeSlices,
+    blk: usize,
+    outs: &mut [&mut [f32]],
+) {
+    let k_max = max_mult as usize;
+    let pos = &welded.positions;
+    let mut at = [0usize; MAX_MAX_MULT as usize + 1];
+    for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
+        if let (Some(&b), Some(&s)) = (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD)) {
+            prefetch(&pos[b as usize]);
+            for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
+                prefetch(&pos[o as usize]);
+            }
+        }
+        let a = pos[edges.a[e] as usize];
+        let b = pos[edges.b[e] as usize];
+        let opp = edges.opposites(e);
+        if let ([o0, o1], true) = (opp, k_max >= 2) {
+            // An edge of two triangles, almost every edge of a closed
+            // mesh: one record of k = 2, written whole. The general
+            // loop below took the dragon's sides 6.5 ms (7.0 with the
+            // caches emptied first), this 5.1 (5.7); a local probe.
+            let (o0, o1) = (pos[*o0 as usize], pos[*o1 as usize]);
+            let out = &mut outs[2][at[2]..at[2] + 16];
+            at[2] += 16;
+            out.copy_from_slice(&[
+                a[0], a[1], a[2], 2.0, b[0], b[1], b[2], 2.0, o0[0], o0[1], o0[2], 1.0, o1[0],
+                o1[1], o1[2], 1.0,
+            ]);
+            continue;
+        }
+        let n = opp.len() as f32;
+        for chunk in opp.chunks(k_max) {
+            let k = chunk.len();
+            let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
+            at[k] += (2 + k) * 4;
+            out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
+            out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
+            for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
+                let o = pos[o as usize];
+                slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
+            }
+        }
     }
 }
 
@@ -321,6 +333,9 @@ pub struct CapsRecords<'a> {
 }
 
 impl<'a> CapsRecords<'a> {
+    /// Floats of the largest unit (a block of triangles, 12 floats each).
+    pub const UNIT_FLOATS: usize = BLOCK * 12;
+
     /// The caps of `welded`.
     pub fn new(welded: &'a Welded) -> Self {
         CapsRecords { welded }
@@ -342,6 +357,124 @@ impl PayloadSource for CapsRecords<'_> {
     fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
         fill_caps(self.welded, unit, outs[0]);
     }
+}
+
+/// Whether every edge of side block `blk` of `edges` (which must hold the
+/// block) has two opposite vertices: then, with K ≥ 2, the block's records
+/// are all in bucket 2, one per edge, in edge order.
+fn pure_block(edges: EdgeSlices, blk: usize) -> bool {
+    let end = ((blk + 1) * BLOCK).min(edges.len());
+    edges.opp_start[blk * BLOCK..=end]
+        .windows(2)
+        .all(|w| w[1].wrapping_sub(w[0]) == 2)
+}
+
+/// Side blocks `blocks` of `edges`, all pure ([`pure_block`]), as a
+/// [`PayloadSource`] of one section: their bucket-2 records.
+struct PureSides<'a> {
+    max_mult: u32,
+    welded: &'a Welded,
+    edges: EdgeSlices<'a>,
+    blocks: std::ops::Range<usize>,
+}
+
+impl PayloadSource for PureSides<'_> {
+    fn units(&self) -> usize {
+        self.blocks.len()
+    }
+
+    fn floats(&self, unit: usize, section: usize) -> usize {
+        let blk = self.blocks.start + unit;
+        let edges = ((blk + 1) * BLOCK).min(self.edges.len()) - blk * BLOCK;
+        if section == 0 { edges * 16 } else { 0 }
+    }
+
+    fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
+        let mut by_k: Vec<&mut [f32]> = (0..=self.max_mult).map(|_| Default::default()).collect();
+        by_k[2] = std::mem::take(&mut outs[0]);
+        fill_sides(
+            self.max_mult,
+            self.welded,
+            self.edges,
+            self.blocks.start + unit,
+            &mut by_k,
+        );
+    }
+}
+
+/// Copies side blocks into `file` while `feed`'s emit makes the edges
+/// (the consumer of `topology::build_edges_opposites_only_fed`), guessing
+/// that the file's first bucket is bucket 2: right for every mesh without
+/// a record of k = 1 (no edge with one opposite vertex, nor with `n` > K
+/// and `n mod K` = 1), which is every closed manifold mesh. Block after
+/// block as the edges are finished, up to the first block with an edge
+/// whose opposite count is not 2 (its records leave bucket 2, so later
+/// blocks' offsets are not known); once the emit has ended, what is left
+/// on both threads. The final writer keeps the blocks that went where
+/// the file puts them and writes the others again: if the guess was
+/// wrong, the whole copy is wasted.
+///
+/// Why: with two threads the side records' copy into the file (83 MB on
+/// the dragon) was one thread's work after the edges were made; buffered
+/// writes into one file take its lock in turn (benches/ROUNDS.md,
+/// "Nineteenth round").
+pub fn write_sides_ahead(
+    feed: &EmitFeed,
+    welded: &Welded,
+    max_mult: u32,
+    file: &crate::format::AheadFile,
+    side: &(dyn Fn() -> bool + Sync),
+) -> crate::error::Result<()> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering::Relaxed};
+    if max_mult < 2 {
+        return Ok(());
+    }
+    // Side units follow the caps' in the final payload; bucket 2 is its
+    // section 1 when it is the first bucket. Block b goes at b whole
+    // blocks past the first bucket's start (every block but the last of
+    // all is whole): 16 floats of 4 or 2 bytes per edge.
+    let first_unit = welded.triangle_count().div_ceil(BLOCK);
+    let block_bytes = (BLOCK * 16) as u64 * (file.vec4_bytes() / 4);
+    // With every edge pure, half as many edges as records.
+    let sides_end =
+        file.sides_offset() + (feed.records() / 2 * 16) as u64 * (file.vec4_bytes() / 4);
+    file.reserve(file.sides_offset(), sides_end)?;
+    // Blocks are taken in order by the threads copying (this one, and the
+    // emitting one once it is done); the first impure block stops them.
+    let next = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let copy = || -> crate::error::Result<()> {
+        let mut bufs = crate::format::UnitBuffers::new(BLOCK * 16);
+        loop {
+            let blk = next.fetch_add(1, Relaxed);
+            if stop.load(Relaxed) {
+                return Ok(());
+            }
+            // All of block `blk`'s edges are done, or every edge is.
+            let (done, ended) = feed.wait((blk + 1) * BLOCK, side);
+            debug_assert!(ended || done >= (blk + 1) * BLOCK);
+            if blk * BLOCK >= done {
+                return Ok(());
+            }
+            let edges = feed.edges(done);
+            if !pure_block(edges, blk) {
+                stop.store(true, Relaxed);
+                return Ok(());
+            }
+            let source = PureSides {
+                max_mult,
+                welded,
+                edges,
+                blocks: blk..blk + 1,
+            };
+            let at = file.sides_offset() + blk as u64 * block_bytes;
+            file.write(&source, first_unit + blk, 1, at, &mut bufs, side)?;
+        }
+    };
+    // The second copier waits in this thread's queue for the emitting
+    // thread, which takes it when its emit is done.
+    let (x, y) = rayon::join(copy, copy);
+    x.and(y)
 }
 
 /// A plan's records as a [`PayloadSource`] ([`Plan::records`]): the caps

@@ -117,7 +117,7 @@ impl Edges {
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles), false).0
+    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles), false, None).0
 }
 
 /// [`build_edges`] without `opp_tri` (left empty): what a build needs, since
@@ -131,6 +131,30 @@ pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edg
         vertex_count,
         chunks_for(triangles),
         simd_available(),
+        None,
+    )
+    .0
+}
+
+/// [`build_edges_opposites_only`], with `consumer` reading the edges while
+/// they are made: it runs beside the emit pass (on another thread when one
+/// is free, else after it), and [`EmitFeed`] hands it each prefix of the
+/// edges as soon as it is final. The emit pass then runs as one job, in
+/// vertex order, so that each edge is written once, in its final place.
+/// The edges returned are the same as without a consumer. Why: a build
+/// copies each finished block of side records into the file while the
+/// rest of the edges are made (benches/ROUNDS.md, "Nineteenth round").
+pub fn build_edges_opposites_only_fed(
+    triangles: &[u32],
+    vertex_count: usize,
+    consumer: &mut (dyn FnMut(&EmitFeed) + Send),
+) -> Edges {
+    build_edges_in::<false>(
+        triangles,
+        vertex_count,
+        chunks_for(triangles),
+        simd_available(),
+        Some(consumer),
     )
     .0
 }
@@ -146,6 +170,7 @@ pub fn build_edges_opposites_only_timed(
         vertex_count,
         chunks_for(triangles),
         simd_available(),
+        None,
     )
 }
 
@@ -180,6 +205,7 @@ fn build_edges_in<const TRI: bool>(
     vertex_count: usize,
     chunks: usize,
     simd: bool,
+    consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
 ) -> (Edges, PassTimes) {
     use rayon::prelude::*;
     use std::time::Instant;
@@ -198,6 +224,17 @@ fn build_edges_in<const TRI: bool>(
 
     // Pass 1: listings per (chunk, vertex); listings and records
     // (half-edges) per (chunk, range).
+    // Fed, pass 1 also XORs a key of every edge of every triangle: an
+    // edge on an even number of triangles cancels out, so a nonzero result
+    // means some edge has an odd opposite count, 1 (open) most often. The
+    // consumer (`layout::write_sides_ahead`) guesses that no edge has one
+    // opposite vertex, and a wrong guess costs a copy of the side records;
+    // so such a mesh is not fed, and its emit runs on every thread. The
+    // keys are multiplied by an odd constant (a bijection), so one odd
+    // edge never cancels out; several could, only by chance, and then the
+    // guess is checked where the file is finished.
+    let parity = consumer.is_some();
+    let odd_edges = std::sync::atomic::AtomicU64::new(0);
     let mut counts: Vec<(Vec<u32>, Vec<u64>)> = tri_chunks
         .par_iter()
         .map(|tris| {
@@ -207,15 +244,22 @@ fn build_edges_in<const TRI: bool>(
             let mut counts = crate::alloc::zeroed_large::<u32>(vertex_count + 1);
             let c = &mut counts[1..];
             let mut rr = vec![0u64; ranges];
+            let mut odd = 0u64;
             for (i, t) in tris.chunks_exact(3).enumerate() {
                 if let Some(f) = tris.get(3 * (i + AHEAD)..3 * (i + AHEAD) + 3) {
                     for &x in f {
                         crate::hint::prefetch(&c[x as usize]);
                     }
                 }
-                let (lo, mid, _) = sort3(t);
+                let (lo, mid, hi) = sort3(t);
                 c[lo as usize] += 1;
                 c[mid as usize] += 1;
+                if parity {
+                    let key = |a: u32, b: u32| {
+                        ((u64::from(a) << 32) | u64::from(b)).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                    };
+                    odd ^= key(lo, mid) ^ key(lo, hi) ^ key(mid, hi);
+                }
                 // Per range, listings in the high half and records in
                 // the low half: one add for both. All chunks together have
                 // fewer than 2^32 records (asserted above), so the low
@@ -223,9 +267,11 @@ fn build_edges_in<const TRI: bool>(
                 rr[range_of(lo)] += (1 << 32) | 2;
                 rr[range_of(mid)] += (1 << 32) | 1;
             }
+            odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
             (counts, rr)
         })
         .collect();
+    let consumer = consumer.filter(|_| odd_edges.into_inner() == 0);
     // Where each range's listings and records start.
     let mut list_start = vec![0u32; ranges + 1];
     let mut rec_start = vec![0usize; ranges + 1];
@@ -359,7 +405,14 @@ fn build_edges_in<const TRI: bool>(
     // the same offsets in `a`, `b` and `opp_start`, sized for records, and
     // are moved down to their final place afterwards (pass 4).
     let n = rec_start[ranges];
-    let groups = rayon::current_num_threads().clamp(1, ranges.max(1));
+    // Fed (`consumer`): one group, emitted in order, so that every edge
+    // and record is written straight to its final place and a finished
+    // prefix can be read while the rest is made.
+    let groups = if consumer.is_some() {
+        1
+    } else {
+        rayon::current_num_threads().clamp(1, ranges.max(1))
+    };
     let mut group_start = vec![0usize; groups + 1];
     for (g, gs) in group_start.iter_mut().enumerate().skip(1) {
         // The first range boundary at or past g/groups of the records.
@@ -390,69 +443,74 @@ fn build_edges_in<const TRI: bool>(
     // The listings, as an address (shared by the jobs, which read their
     // own listings through it and write their own records over them).
     let list_at = list.as_mut_ptr() as usize;
-    let rt = &mut e.opp_tri.spare_capacity_mut()[..if TRI { n } else { 0 }];
-    let (ra, rb) = (
-        &mut e.a.spare_capacity_mut()[..n],
-        &mut e.b.spare_capacity_mut()[..n],
-    );
-    // `opp_start[0]` goes to the first group: written here, its first
-    // touch of a fresh huge page was 0.26 ms before any group started, with
-    // two threads on the dragon (local timers).
-    let (mut rs0, rs) = e.opp_start.spare_capacity_mut()[..n + 1].split_at_mut(1);
-    let mut jobs = Vec::with_capacity(groups);
-    {
-        let (mut rt, mut ra, mut rb, mut rs) = (rt, ra, rb, rs);
-        for g in 0..groups {
-            let m = rec_start[group_start[g + 1]] - rec_start[group_start[g]];
-            let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
-            let (a1, a2) = ra.split_at_mut(m);
-            let (b1, b2) = rb.split_at_mut(m);
-            let (s1, s2) = rs.split_at_mut(m);
-            jobs.push([std::mem::take(&mut rs0), t1, a1, b1, s1]);
-            (rt, ra, rb, rs) = (t2, a2, b2, s2);
-        }
-    }
     // Where each group's records are written: the start of its listings,
     // in u32 (two per listing).
     let records_at = |g: usize| 2 * start[(group_start[g] * RANGE).min(vertex_count)] as usize;
-    let group_edges: Vec<usize> = jobs
-        .into_par_iter()
-        .enumerate()
-        .map_init(
-            Vec::new,
-            |buf: &mut Vec<[u32; 4]>, (g, [zero, ot, oa, ob, os])| {
-                if let [z] = zero {
-                    *z = MaybeUninit::new(0);
-                }
-                let first = group_start[g] * RANGE;
-                let last = (group_start[g + 1] * RANGE).min(vertex_count);
-                let m = oa.len();
-                let out = GroupOut {
-                    // SAFETY (of the writes through it): the group's first `m`
-                    // u32 from here lie inside its listings (see where `e` is
-                    // made), which only this job touches.
-                    opp: (list_at as *mut u32).wrapping_add(records_at(g)),
-                    tri: ot,
-                    a: oa,
-                    b: ob,
-                    end: os,
-                    base: rec_start[group_start[g]] as u32,
-                    records: 0,
-                    edges: 0,
-                };
-                let listings = Listings {
-                    start: &start,
-                    at: list_at as *const [u32; 2],
-                    tri: &list_t,
-                };
-                let (records, edges) = emit_group::<TRI>(out, &listings, first..last, buf, simd);
-                // The group's records filled its `m` slots (and its range of
-                // `opp_tri`): pass 1 counted them.
-                assert_eq!(records, m, "topology: records miscounted");
-                edges
-            },
-        )
-        .collect();
+    let group_edges: Vec<usize> = if let Some(consumer) = consumer {
+        debug_assert!(!TRI, "fed emits are opposites-only");
+        vec![emit_fed(&mut e, n, list_at, &start, simd, consumer)]
+    } else {
+        let rt = &mut e.opp_tri.spare_capacity_mut()[..if TRI { n } else { 0 }];
+        let (ra, rb) = (
+            &mut e.a.spare_capacity_mut()[..n],
+            &mut e.b.spare_capacity_mut()[..n],
+        );
+        // `opp_start[0]` goes to the first group: written here, its first
+        // touch of a fresh huge page was 0.26 ms before any group started, with
+        // two threads on the dragon (local timers).
+        let (mut rs0, rs) = e.opp_start.spare_capacity_mut()[..n + 1].split_at_mut(1);
+        let mut jobs = Vec::with_capacity(groups);
+        {
+            let (mut rt, mut ra, mut rb, mut rs) = (rt, ra, rb, rs);
+            for g in 0..groups {
+                let m = rec_start[group_start[g + 1]] - rec_start[group_start[g]];
+                let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
+                let (a1, a2) = ra.split_at_mut(m);
+                let (b1, b2) = rb.split_at_mut(m);
+                let (s1, s2) = rs.split_at_mut(m);
+                jobs.push([std::mem::take(&mut rs0), t1, a1, b1, s1]);
+                (rt, ra, rb, rs) = (t2, a2, b2, s2);
+            }
+        }
+        jobs.into_par_iter()
+            .enumerate()
+            .map_init(
+                Vec::new,
+                |buf: &mut Vec<[u32; 4]>, (g, [zero, ot, oa, ob, os])| {
+                    if let [z] = zero {
+                        *z = MaybeUninit::new(0);
+                    }
+                    let first = group_start[g] * RANGE;
+                    let last = (group_start[g + 1] * RANGE).min(vertex_count);
+                    let m = oa.len();
+                    let out = GroupOut {
+                        // SAFETY (of the writes through it): the group's first `m`
+                        // u32 from here lie inside its listings (see where `e` is
+                        // made), which only this job touches.
+                        opp: (list_at as *mut u32).wrapping_add(records_at(g)),
+                        tri: ot,
+                        a: oa,
+                        b: ob,
+                        end: os,
+                        base: rec_start[group_start[g]] as u32,
+                        records: 0,
+                        edges: 0,
+                    };
+                    let listings = Listings {
+                        start: &start,
+                        at: list_at as *const [u32; 2],
+                        tri: &list_t,
+                    };
+                    let (records, edges) =
+                        emit_group::<TRI>(out, &listings, first..last, buf, simd);
+                    // The group's records filled its `m` slots (and its range of
+                    // `opp_tri`): pass 1 counted them.
+                    assert_eq!(records, m, "topology: records miscounted");
+                    edges
+                },
+            )
+            .collect()
+    };
     drop(list_t);
 
     let emitted = Instant::now();
@@ -533,6 +591,224 @@ fn build_edges_in<const TRI: bool>(
         compact: emitted.elapsed(),
     };
     (e, times)
+}
+
+/// Edges as borrowed arrays, in the layout of [`Edges`] (without the
+/// opposite vertices' triangles): what the layout's fills read, from
+/// finished [`Edges`] or from the prefix an [`EmitFeed`] hands out.
+#[derive(Debug, Clone, Copy)]
+pub struct EdgeSlices<'a> {
+    /// Smaller endpoint of each edge.
+    pub a: &'a [u32],
+    /// Larger endpoint of each edge.
+    pub b: &'a [u32],
+    /// `opp_start[e]..opp_start[e + 1]` is edge `e`'s range in `opp` (one
+    /// entry more than the edges).
+    pub opp_start: &'a [u32],
+    /// Opposite vertices.
+    pub opp: &'a [u32],
+}
+
+impl EdgeSlices<'_> {
+    /// Number of edges.
+    pub fn len(&self) -> usize {
+        self.a.len()
+    }
+
+    /// True when there are no edges.
+    pub fn is_empty(&self) -> bool {
+        self.a.is_empty()
+    }
+
+    /// Opposite vertices of edge `e`.
+    #[inline]
+    pub fn opposites(&self, e: usize) -> &[u32] {
+        &self.opp[self.opp_start[e] as usize..self.opp_start[e + 1] as usize]
+    }
+}
+
+impl Edges {
+    /// The edges as [`EdgeSlices`].
+    pub fn slices(&self) -> EdgeSlices<'_> {
+        EdgeSlices {
+            a: &self.a,
+            b: &self.b,
+            opp_start: &self.opp_start,
+            opp: &self.opp,
+        }
+    }
+}
+
+/// The edges an emit pass run in order has finished so far, for a reader
+/// on another thread ([`build_edges_opposites_only_fed`]).
+///
+/// The emit writes edge after edge, each with its opposite vertices, in
+/// their final places; after every step of 4,096 vertices it
+/// publishes how many edges are done (a release store), and a reader that
+/// has seen that count (an acquire load) reads those edges while later
+/// ones are written after them: the writer never writes below the count
+/// again, and takes its mutable views of the arrays fresh for each step,
+/// from the count on.
+pub struct EmitFeed {
+    records: usize,
+    done: std::sync::atomic::AtomicUsize,
+    ended: std::sync::atomic::AtomicBool,
+    a: *const u32,
+    b: *const u32,
+    opp_start: *const u32,
+    opp: *const u32,
+}
+
+// SAFETY: the pointers are only read, below the published count, which the
+// writer never writes again (see the type's documentation).
+unsafe impl Sync for EmitFeed {}
+
+impl EmitFeed {
+    /// Records (opposite vertices) the edges will have in all.
+    pub fn records(&self) -> usize {
+        self.records
+    }
+
+    /// Waits until at least `edges` edges are done or the emit has ended,
+    /// doing `side` work meanwhile until it returns false, then spinning;
+    /// returns the edges done and whether the emit has ended (then every
+    /// edge is done).
+    pub fn wait(&self, edges: usize, side: &dyn Fn() -> bool) -> (usize, bool) {
+        use std::sync::atomic::Ordering::Acquire;
+        let mut spins = 0u32;
+        loop {
+            // `ended` first: the count read after it is then the final one.
+            let ended = self.ended.load(Acquire);
+            let done = self.done.load(Acquire);
+            if done >= edges || ended {
+                return (done, ended);
+            }
+            if side() {
+                continue;
+            }
+            spins += 1;
+            if spins.is_multiple_of(1024) {
+                std::thread::yield_now();
+            } else {
+                std::hint::spin_loop();
+            }
+        }
+    }
+
+    /// The first `n` edges; `n` must be at most a count [`EmitFeed::wait`]
+    /// returned.
+    pub fn edges(&self, n: usize) -> EdgeSlices<'_> {
+        let done = self.done.load(std::sync::atomic::Ordering::Acquire);
+        assert!(n <= done, "topology: {n} edges asked for, {done} done");
+        // SAFETY: the first `done` edges, their `opp_start` entries
+        // (`done + 1`, the first written before any is published) and
+        // their opposite vertices are written and never written again
+        // (see the type's documentation).
+        unsafe {
+            let records = *self.opp_start.add(n) as usize;
+            EdgeSlices {
+                a: std::slice::from_raw_parts(self.a, n),
+                b: std::slice::from_raw_parts(self.b, n),
+                opp_start: std::slice::from_raw_parts(self.opp_start, n + 1),
+                opp: std::slice::from_raw_parts(self.opp, records),
+            }
+        }
+    }
+}
+
+/// Vertices an [`EmitFeed`]'s emit pass does between two publications: a
+/// few thousand edges, so a reader waits little, and a hundred steps for
+/// the dragon's vertices.
+const FEED_STEP: usize = RANGE;
+
+/// Pass 3 of [`build_edges_in`] as one job in vertex order, with
+/// `consumer` beside it reading the finished prefix (see [`EmitFeed`]):
+/// the `n` records go over the listings at address `list_at` (vertex v's
+/// from `start[v]` on; from the first, as the first group's do) and the edges to the front of `e`'s arrays, all in
+/// their final places. Returns the number of edges.
+fn emit_fed(
+    e: &mut Edges,
+    n: usize,
+    list_at: usize,
+    start: &[u32],
+    simd: bool,
+    consumer: &mut (dyn FnMut(&EmitFeed) + Send),
+) -> usize {
+    let vertex_count = start.len() - 1;
+    let opp = list_at as *mut u32;
+    use std::sync::atomic::Ordering::Release;
+    // Raw pointers only, taken once: the writer's views of each step are
+    // made from them, past what it has published (see `EmitFeed`).
+    let (a, b, s) = (
+        e.a.spare_capacity_mut()[..n].as_mut_ptr(),
+        e.b.spare_capacity_mut()[..n].as_mut_ptr(),
+        e.opp_start.spare_capacity_mut()[..n + 1].as_mut_ptr(),
+    );
+    // SAFETY: `opp_start` has room for n + 1 entries.
+    unsafe { s.write(MaybeUninit::new(0)) };
+    let feed = EmitFeed {
+        records: n,
+        done: 0.into(),
+        ended: false.into(),
+        a: a.cast(),
+        b: b.cast(),
+        opp_start: s.cast(),
+        opp,
+    };
+    /// Marks the feed ended however the emit leaves (a panic included),
+    /// so that a reader waiting on it returns.
+    struct End<'a>(&'a EmitFeed);
+    impl Drop for End<'_> {
+        fn drop(&mut self) {
+            self.0.ended.store(true, Release);
+        }
+    }
+    let (pointers, feed_ref) = ((a as usize, b as usize, s as usize, opp as usize), &feed);
+    let emit = move || {
+        let _end = End(feed_ref);
+        let (a, b, s, opp) = (
+            pointers.0 as *mut MaybeUninit<u32>,
+            pointers.1 as *mut MaybeUninit<u32>,
+            pointers.2 as *mut MaybeUninit<u32>,
+            pointers.3 as *mut u32,
+        );
+        let listings = Listings {
+            start,
+            at: list_at as *const [u32; 2],
+            tri: &[],
+        };
+        let mut buf = Vec::new();
+        let (mut records, mut edges) = (0usize, 0usize);
+        let mut v = 0;
+        while v < vertex_count {
+            let next = (v + FEED_STEP).min(vertex_count);
+            // SAFETY: slots `edges..n` of `a`, `b` and of `opp_start` past
+            // its first entry lie in their arrays (edges never outnumber
+            // records), and nothing else writes or reads them until they are
+            // published; records go from `records` on, over listings already
+            // read (as for a group).
+            let out = unsafe {
+                GroupOut {
+                    opp: opp.add(records),
+                    tri: &mut [],
+                    a: std::slice::from_raw_parts_mut(a.add(edges), n - edges),
+                    b: std::slice::from_raw_parts_mut(b.add(edges), n - edges),
+                    end: std::slice::from_raw_parts_mut(s.add(1 + edges), n - edges),
+                    base: records as u32,
+                    records: 0,
+                    edges: 0,
+                }
+            };
+            let (r, ne) = emit_group::<false>(out, &listings, v..next, &mut buf, simd);
+            (records, edges) = (records + r, edges + ne);
+            feed_ref.done.store(edges, Release);
+            v = next;
+        }
+        assert_eq!(records, n, "topology: records miscounted");
+        edges
+    };
+    let (edges, ()) = rayon::join(emit, || consumer(feed_ref));
+    edges
 }
 
 /// One group's output in pass 3 of [`build_edges`]: where its records and
@@ -1217,13 +1493,13 @@ mod tests {
         };
         for chunks in 1..=5 {
             same_edges(
-                &build_edges_in::<true>(&tris, vertices, chunks, false).0,
+                &build_edges_in::<true>(&tris, vertices, chunks, false, None).0,
                 &expected,
                 &format!("{chunks} chunks"),
             );
             for simd in [false, simd_available()] {
                 same_edges(
-                    &build_edges_in::<false>(&tris, vertices, chunks, simd).0,
+                    &build_edges_in::<false>(&tris, vertices, chunks, simd, None).0,
                     &without_tri,
                     &format!("{chunks} chunks, opposites only, simd {simd}"),
                 );
@@ -1252,7 +1528,7 @@ mod tests {
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(build_edges_opposites_only(&[], 5), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>(&tris[..3], vertices, 4, false).0,
+            build_edges_in::<true>(&tris[..3], vertices, 4, false, None).0,
             naive(&tris[..3])
         );
     }
@@ -1263,6 +1539,78 @@ mod tests {
     /// last layer's (3, 4), and padding that sorts first (0 instead of
     /// `u64::MAX`); both also fail the comparison with the obvious
     /// implementation below.
+    /// The fed emit (`build_edges_opposites_only_fed`): every prefix the
+    /// consumer is handed, read while the rest is being made, is the final
+    /// edges' prefix, and the edges are the unfed ones; a mesh with an edge
+    /// on an odd number of triangles is not fed. Caught: publishing the
+    /// count before a step's edges are written (`done` stored first, the
+    /// snapshots then held unwritten entries), and the parity left out of
+    /// pass 1 (the odd soup fed).
+    #[test]
+    fn fed_emit_hands_out_final_prefixes_and_only_for_even_fans() {
+        let vertices = 5 * RANGE + 11;
+        let mut bits = crate::multiplicity::test_bits(0x2545_f491_4f6c_dd1du64);
+        let mut rng = move || bits() >> 11;
+        let mut odd = Vec::new();
+        while odd.len() < 3 * 60_000 {
+            let a = (rng() % vertices as u64) as u32;
+            let b = (a + 1 + (rng() % 3) as u32) % vertices as u32;
+            let c = (a + 2 + (rng() % 5) as u32) % vertices as u32;
+            if a != b && b != c && a != c {
+                odd.extend_from_slice(&[a, b, c]);
+            }
+        }
+        // Every triangle twice (the second reversed): every fan even.
+        let even: Vec<u32> = odd
+            .chunks_exact(3)
+            .flat_map(|t| [t[0], t[1], t[2], t[2], t[1], t[0]])
+            .collect();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        for (tris, fed) in [(&even, true), (&odd, false)] {
+            let want = build_edges_opposites_only(tris, vertices);
+            let mut seen = Vec::new();
+            let got = pool.install(|| {
+                build_edges_opposites_only_fed(tris, vertices, &mut |feed: &EmitFeed| {
+                    assert_eq!(feed.records(), want.opp.len());
+                    let mut want_edges = 1;
+                    loop {
+                        let (done, ended) = feed.wait(want_edges, &|| false);
+                        let e = feed.edges(done);
+                        seen.push((
+                            done,
+                            e.a.to_vec(),
+                            e.b.to_vec(),
+                            e.opp_start.to_vec(),
+                            e.opp.to_vec(),
+                        ));
+                        if ended {
+                            break;
+                        }
+                        want_edges = done + 1;
+                    }
+                })
+            });
+            same_edges(&got, &want, &format!("fed {fed}"));
+            assert_eq!(!seen.is_empty(), fed, "fed {fed}: consumer called");
+            if fed {
+                assert_eq!(
+                    seen.last().unwrap().0,
+                    want.len(),
+                    "the last prefix is every edge"
+                );
+                for (done, a, b, s, o) in &seen {
+                    assert!(a[..] == want.a[..*done], "a, {done} edges");
+                    assert!(b[..] == want.b[..*done], "b, {done} edges");
+                    assert!(s[..] == want.opp_start[..=*done], "opp_start, {done} edges");
+                    assert!(o[..] == want.opp[..o.len()], "opp, {done} edges");
+                }
+            }
+        }
+    }
+
     #[test]
     fn sort_small_is_a_stable_sort_by_larger_endpoint() {
         let check = |keys: &[u32]| {
