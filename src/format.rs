@@ -921,13 +921,6 @@ pub struct WrittenAhead {
     pieces: Vec<Piece>,
 }
 
-impl WrittenAhead {
-    /// Number of pieces written.
-    pub fn pieces(&self) -> usize {
-        self.pieces.len()
-    }
-}
-
 impl AheadFile {
     /// A new temp file beside `path` for a one-mesh file with `header` and
     /// `mesh`, of which only the name and `stats.triangles` are used: the
