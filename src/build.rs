@@ -58,13 +58,15 @@ pub struct Timings {
     pub weld: f64,
     /// Edges and opposite vertices, and their statistics; with two threads
     /// or more on an uncompressed file with header room
-    /// (`format::header_room`), also the caps, written beside the edges.
+    /// (`format::header_room`), also the caps, written beside the edges,
+    /// and on a mesh whose every fan is even the side blocks written as
+    /// the edges are finished (`layout::write_sides_ahead`).
     pub topology: f64,
     /// Buckets and splitting (the counting pass, [`Plan`]); with
     /// `--compress` also filling the sides and caps buffers.
     pub layout: f64,
     /// Encoding and writing the file. Without `--compress` this includes
-    /// filling the sides and caps records (the caps unless written under
+    /// filling the sides and caps records (those not written under
     /// `topology`), which go straight into the file
     /// (`format::write_file_streamed`); with it, compressing whole buffers.
     pub write: f64,
@@ -417,7 +419,7 @@ pub fn build_file_with(
     // "Fifth round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
     // The headers, with what the edges decide (statistics, buckets) and
-    // the bounds still to come; their length is all `write_ahead` needs.
+    // the bounds still to come; their length is all `format::AheadFile` needs.
     let name = input
         .file_stem()
         .map(|n| n.to_string_lossy().into_owned())
@@ -463,11 +465,13 @@ pub fn build_file_with(
     };
     // The edges (only their opposite vertices: nothing reads the opposite
     // vertices' triangles), and with two threads or more, an uncompressed
-    // file's caps written meanwhile (`format::write_ahead`): a file with
+    // file's caps written meanwhile (`format::AheadFile`): a file with
     // header room (`format::header_room`) starts its payload at an offset
     // the edges do not change (unless its mesh has more distinct opposite
-    // counts than the room holds: then the writer writes the caps again).
-    // Why: benches/ROUNDS.md, "Eighteenth round".
+    // counts than the room holds: then the writer writes the caps again),
+    // and its side blocks as the edges are finished, where the first
+    // bucket is bucket 2. Why: benches/ROUNDS.md, "Eighteenth round" and
+    // "Nineteenth round".
     stage("topology");
     let i = Instant::now();
     let triangles = welded.triangle_count() as u64;

@@ -326,7 +326,7 @@ fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
 
 /// The caps records of a welded mesh alone, as a [`PayloadSource`] of one
 /// section in the same units as the first units of [`Records`] (one per
-/// caps block): what `format::write_ahead` writes while the edges are
+/// caps block): what `format::AheadFile::write` writes while the edges are
 /// still being made, since the caps need only the welded mesh.
 pub struct CapsRecords<'a> {
     welded: &'a Welded,
