@@ -1439,6 +1439,25 @@ mod tests {
         }
     }
 
+    /// `triangles` random triangles over a strip of `vertices` vertices,
+    /// each on three vertices a few ids apart, so that edges repeat (open,
+    /// manifold and non-manifold edges, duplicates in both windings), in
+    /// every corner order.
+    fn strip_soup(vertices: usize, triangles: usize, seed: u64) -> Vec<u32> {
+        let mut bits = crate::multiplicity::test_bits(seed);
+        let mut rng = move || bits() >> 11;
+        let mut tris = Vec::with_capacity(3 * triangles);
+        while tris.len() < 3 * triangles {
+            let a = (rng() % vertices as u64) as u32;
+            let b = (a + 1 + (rng() % 3) as u32) % vertices as u32;
+            let c = (a + 2 + (rng() % 5) as u32) % vertices as u32;
+            if a != b && b != c && a != c {
+                tris.extend_from_slice(&[a, b, c]);
+            }
+        }
+        tris
+    }
+
     #[test]
     fn matches_the_obvious_implementation_across_ranges_and_chunks() {
         // Several vertex ranges; triangles over a random strip of vertices
@@ -1448,17 +1467,7 @@ mod tests {
         // on a range boundary. Cut into 1 to 5 chunks, and through the
         // public entry point with 1 to 4 threads (its chunks and groups).
         let vertices = 3 * RANGE + 77;
-        let mut bits = crate::multiplicity::test_bits(0x9e37_79b9_7f4a_7c15u64);
-        let mut rng = move || bits() >> 11;
-        let mut tris = Vec::new();
-        while tris.len() < 3 * (PARALLEL_MIN + 5000) {
-            let a = (rng() % vertices as u64) as u32;
-            let b = (a + 1 + (rng() % 3) as u32) % vertices as u32;
-            let c = (a + 2 + (rng() % 5) as u32) % vertices as u32;
-            if a != b && b != c && a != c {
-                tris.extend_from_slice(&[a, b, c]);
-            }
-        }
+        let mut tris = strip_soup(vertices, PARALLEL_MIN + 5000, 0x9e37_79b9_7f4a_7c15);
         for i in 0..100u32 {
             tris.extend_from_slice(&[RANGE as u32, RANGE as u32 + 1 + i % 50, 5 + i]);
             tris.extend_from_slice(&[7 + i % 9, RANGE as u32 - 1, 2 * RANGE as u32 + i]);
@@ -1549,17 +1558,7 @@ mod tests {
     #[test]
     fn fed_emit_hands_out_final_prefixes_and_only_for_even_fans() {
         let vertices = 5 * RANGE + 11;
-        let mut bits = crate::multiplicity::test_bits(0x2545_f491_4f6c_dd1du64);
-        let mut rng = move || bits() >> 11;
-        let mut odd = Vec::new();
-        while odd.len() < 3 * 60_000 {
-            let a = (rng() % vertices as u64) as u32;
-            let b = (a + 1 + (rng() % 3) as u32) % vertices as u32;
-            let c = (a + 2 + (rng() % 5) as u32) % vertices as u32;
-            if a != b && b != c && a != c {
-                odd.extend_from_slice(&[a, b, c]);
-            }
-        }
+        let odd = strip_soup(vertices, 60_000, 0x2545_f491_4f6c_dd1d);
         // Every triangle twice (the second reversed): every fan even.
         let even: Vec<u32> = odd
             .chunks_exact(3)
