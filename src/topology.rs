@@ -734,9 +734,9 @@ fn emit_fed(
     simd: bool,
     consumer: &mut (dyn FnMut(&EmitFeed) + Send),
 ) -> usize {
+    use std::sync::atomic::Ordering::Release;
     let vertex_count = start.len() - 1;
     let opp = list_at as *mut u32;
-    use std::sync::atomic::Ordering::Release;
     // Raw pointers only, taken once: the writer's views of each step are
     // made from them, past what it has published (see `EmitFeed`).
     let (a, b, s) = (
