@@ -775,6 +775,39 @@ pub fn split_pieces<'a>(buf: &'a mut [f32], lens: &[usize]) -> Vec<&'a mut [f32]
 /// left.
 const UNWRITTEN: u32 = 0x7fa5_11ed;
 
+/// Turns at writing one file, for threads that write units of it: a
+/// thread about to write while another writes does `side` work until that
+/// write ends or no side work is left, then writes (if both write, the
+/// kernel serialises them on the file's lock). Why: writes into one file
+/// take its lock in turn (`examples/file_write.rs`), so a thread waiting
+/// for it is a thread idle; here it hashes what is left of the input's
+/// digest instead (`load::DigestSlices`).
+#[derive(Default)]
+struct WriteTurns(std::sync::atomic::AtomicBool);
+
+impl WriteTurns {
+    /// Writes `bytes` at `offset` of `file` in turn, doing `side` work
+    /// while another thread writes.
+    fn write(
+        &self,
+        file: &std::fs::File,
+        bytes: &[u8],
+        offset: u64,
+        side: &dyn Fn() -> bool,
+    ) -> std::io::Result<()> {
+        use std::sync::atomic::Ordering::Relaxed;
+        while self.0.load(Relaxed) {
+            if !side() {
+                break;
+            }
+        }
+        self.0.store(true, Relaxed);
+        let written = write_at(file, bytes, offset);
+        self.0.store(false, Relaxed);
+        written
+    }
+}
+
 /// Writes `buf` at `offset` of `file`.
 fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()> {
     #[cfg(unix)]
@@ -898,9 +931,8 @@ pub struct AheadFile {
     caps_offset: u64,
     sides_offset: u64,
     pieces: std::sync::Mutex<Vec<Piece>>,
-    /// Set while a thread writes: another then spins instead of blocking
-    /// on the file's lock (as [`write_file_streamed_finishing`] does).
-    writing: std::sync::atomic::AtomicBool,
+    /// The writing threads' turns.
+    turns: WriteTurns,
     /// Held while the file's length changes.
     resizing: std::sync::Mutex<()>,
 }
@@ -941,7 +973,7 @@ impl AheadFile {
             // Where the first bucket starts: right after the caps.
             sides_offset: align_up(caps.offset + caps.length),
             pieces: Default::default(),
-            writing: Default::default(),
+            turns: Default::default(),
             resizing: Default::default(),
         })
     }
@@ -979,9 +1011,8 @@ impl AheadFile {
     /// the other from byte `at`, on the calling thread with its `bufs`, as
     /// units `first_unit..` of section `section` of the final payload;
     /// returns where the last ended. A thread that finds another writing
-    /// waits for it with `side` work (as [`write_file_streamed_finishing`]
-    /// does), then by spinning, not on the file's lock (a sleep and a
-    /// wake-up each time).
+    /// does `side` work meanwhile (as [`write_file_streamed_finishing`]
+    /// does).
     pub fn write(
         &self,
         source: &dyn PayloadSource,
@@ -991,23 +1022,9 @@ impl AheadFile {
         bufs: &mut UnitBuffers,
         side: &dyn Fn() -> bool,
     ) -> Result<u64> {
-        use std::sync::atomic::Ordering::{Acquire, Relaxed, Release};
         let per_float = self.enc.vec4_bytes() / 4;
         let file = self.tmp.as_file();
-        let write = |bytes: &[u8], offset: u64| {
-            while self
-                .writing
-                .compare_exchange_weak(false, true, Acquire, Relaxed)
-                .is_err()
-            {
-                if !side() {
-                    std::hint::spin_loop();
-                }
-            }
-            let written = write_at(file, bytes, offset);
-            self.writing.store(false, Release);
-            written
-        };
+        let write = |bytes: &[u8], offset: u64| self.turns.write(file, bytes, offset, side);
         let mut pieces = Vec::with_capacity(source.units());
         let mut at = at;
         for u in 0..source.units() {
@@ -1132,7 +1149,6 @@ pub fn write_file_streamed_finishing(
     input: impl FnOnce() -> (u64, [u8; 32]),
 ) -> Result<(Header, u64)> {
     use rayon::prelude::*;
-    use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
     let enc = header.options.encoding().map_err(Error::Other)?;
     let per_float = enc.vec4_bytes() / 4;
     let sections = 1 + mesh.buckets.len();
@@ -1201,28 +1217,14 @@ pub fn write_file_streamed_finishing(
     let file = tmp.as_file();
     file.set_len(size).map_err(|e| Error::io(path, e))?;
     preallocate(file, from, size);
-    // Set while a thread writes (a hint: two threads may both write, and
-    // the kernel then serialises them as before).
-    let writing = AtomicBool::new(false);
+    let turns = WriteTurns::default();
     // Each thread's fill buffer holds the largest unit.
     let widest = (0..units)
         .filter(|&u| done[u].is_none())
         .map(|u| (0..sections).map(|s| source.floats(u, s)).sum::<usize>())
         .max()
         .unwrap_or(0);
-    let write = |bytes: &[u8], offset: u64| {
-        // Another thread's write holds the file: side work until it is
-        // done (or none is left).
-        while writing.load(Relaxed) {
-            if !side() {
-                break;
-            }
-        }
-        writing.store(true, Relaxed);
-        let written = write_at(file, bytes, offset);
-        writing.store(false, Relaxed);
-        written
-    };
+    let write = |bytes: &[u8], offset: u64| turns.write(file, bytes, offset, side);
     // Per unit, its pieces' CRCs (a unit written ahead has its one piece's,
     // in its section's place).
     let crcs: Vec<Vec<crc32fast::Hasher>> = done
