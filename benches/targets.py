@@ -181,7 +181,7 @@ def main():
             run(["cargo", "run", "--release", "--quiet", "--example", "scene", "--",
                  str(scene_triangles), scene + ".tmp"], stdout=subprocess.DEVNULL)
             os.replace(scene + ".tmp", scene)
-        inputs.append((f"{scene_triangles // 1_000_000}M scene", scene))
+        inputs.append((f"{scene_triangles / 1e6:g}M scene", scene))
 
     results = []
     for name, path in inputs:
