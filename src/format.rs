@@ -1009,8 +1009,7 @@ impl AheadFile {
 
     /// Writes every unit of `source`, a payload of one section, one after
     /// the other from byte `at`, on the calling thread with its `bufs`, as
-    /// units `first_unit..` of section `section` of the final payload;
-    /// returns where the last ended. A thread that finds another writing
+    /// units `first_unit..` of section `section` of the final payload. A thread that finds another writing
     /// does `side` work meanwhile (as [`write_file_streamed_finishing`]
     /// does).
     pub fn write(
@@ -1021,7 +1020,7 @@ impl AheadFile {
         at: u64,
         bufs: &mut UnitBuffers,
         side: &dyn Fn() -> bool,
-    ) -> Result<u64> {
+    ) -> Result<()> {
         let per_float = self.enc.vec4_bytes() / 4;
         let file = self.tmp.as_file();
         let write = |bytes: &[u8], offset: u64| self.turns.write(file, bytes, offset, side);
@@ -1044,16 +1043,14 @@ impl AheadFile {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .extend(pieces);
-        Ok(at)
+        Ok(())
     }
 
-    /// The file and what was written into it.
+    /// The file and what was written into it (in no particular order).
     pub fn finish(self) -> WrittenAhead {
-        let mut pieces = self.pieces.into_inner().unwrap_or_else(|e| e.into_inner());
-        pieces.sort_by_key(|p| (p.unit, p.section));
         WrittenAhead {
             tmp: self.tmp,
-            pieces,
+            pieces: self.pieces.into_inner().unwrap_or_else(|e| e.into_inner()),
         }
     }
 }
@@ -1180,7 +1177,8 @@ pub fn write_file_streamed_finishing(
     // the file first (from the lowest such byte on, with every piece past
     // it), so that no stale byte stays in a gap the writer leaves as zeros.
     let size = container_len(&header);
-    let mut done: Vec<Option<crc32fast::Hasher>> = (0..units).map(|_| None).collect();
+    // Per unit written ahead, its piece's section and CRC.
+    let mut done: Vec<Option<(usize, crc32fast::Hasher)>> = (0..units).map(|_| None).collect();
     let (tmp, from) = match ahead {
         Some(a) => {
             let fits = |p: &Piece| {
@@ -1201,7 +1199,7 @@ pub fn write_file_streamed_finishing(
             for p in a.pieces {
                 if fits(&p) && p.at + p.len <= cut && done[p.unit].is_none() {
                     from = from.max(p.at + p.len);
-                    done[p.unit] = Some(p.crc);
+                    done[p.unit] = Some((p.section, p.crc));
                 }
             }
             if cut != u64::MAX {
@@ -1233,10 +1231,7 @@ pub fn write_file_streamed_finishing(
         .map_init(
             || unit_buffers(widest),
             |bufs, (u, done)| match done {
-                Some(crc) => {
-                    let s = (0..sections)
-                        .find(|&s| source.floats(u, s) > 0)
-                        .unwrap_or(0);
+                Some((s, crc)) => {
                     let mut hashes = vec![crc32fast::Hasher::new(); s];
                     hashes.push(crc);
                     Ok(hashes)

@@ -433,7 +433,7 @@ pub fn write_sides_ahead(
     // section 1 when it is the first bucket. Block b goes at b whole
     // blocks past the first bucket's start (every block but the last of
     // all is whole): 16 floats of 4 or 2 bytes per edge.
-    let first_unit = welded.triangle_count().div_ceil(BLOCK);
+    let first_unit = CapsRecords::new(welded).units();
     let block_bytes = (BLOCK * 16) as u64 * (file.vec4_bytes() / 4);
     // With every edge pure, half as many edges as records.
     let sides_end =

@@ -51,7 +51,7 @@ impl Edges {
 
     /// Opposite vertices of edge `e`.
     pub fn opposites(&self, e: usize) -> &[u32] {
-        &self.opp[self.opp_start[e] as usize..self.opp_start[e + 1] as usize]
+        self.slices().opposites(e)
     }
 }
 
@@ -609,7 +609,7 @@ pub struct EdgeSlices<'a> {
     pub opp: &'a [u32],
 }
 
-impl EdgeSlices<'_> {
+impl<'a> EdgeSlices<'a> {
     /// Number of edges.
     pub fn len(&self) -> usize {
         self.a.len()
@@ -622,7 +622,7 @@ impl EdgeSlices<'_> {
 
     /// Opposite vertices of edge `e`.
     #[inline]
-    pub fn opposites(&self, e: usize) -> &[u32] {
+    pub fn opposites(self, e: usize) -> &'a [u32] {
         &self.opp[self.opp_start[e] as usize..self.opp_start[e + 1] as usize]
     }
 }
