@@ -69,6 +69,10 @@ pub struct Timings {
     /// filling the sides and caps records (those not written under
     /// `topology`), which go straight into the file
     /// (`format::write_file_streamed`); with it, compressing whole buffers.
+    /// Rebuilding in place, removing the old output is in this stage when
+    /// the build removes it itself ([`build_file`]), and in none when a
+    /// batch's removing thread does ([`build_batch`], the command line;
+    /// `crate::removals`).
     pub write: f64,
     /// The whole build.
     pub total: f64,
@@ -666,7 +670,15 @@ pub fn build_batch_with(
     // its end (its soup, welded mesh and edges) serve the next input's,
     // instead of each build starting from fresh pages (`crate::alloc`).
     let _keep = crate::alloc::KeepFreed::new();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build();
+    // The old outputs the builds swap out are removed on a thread of the
+    // batch's own (`crate::removals`), which every worker of its pool
+    // hands them to.
+    let remover = crate::removals::Remover::start();
+    let mut pool = rayon::ThreadPoolBuilder::new().num_threads(jobs);
+    if let Some(r) = &remover {
+        pool = pool.start_handler(r.attach());
+    }
+    let pool = pool.build();
     let run = || {
         inputs
             .par_iter()
@@ -679,10 +691,21 @@ pub fn build_batch_with(
             })
             .collect()
     };
-    match pool {
+    let mut results: Vec<Result<BuildOutput>> = match pool {
         Ok(pool) => pool.install(run),
         Err(_) => run(),
+    };
+    // An old output that could not be removed fails its input's build, as
+    // when the build removed it itself (the new output is in place).
+    for (output, e) in remover
+        .map(crate::removals::Remover::finish)
+        .unwrap_or_default()
+    {
+        if let Some(n) = outputs.iter().position(|o| *o == output) {
+            results[n] = Err(e);
+        }
     }
+    results
 }
 
 #[cfg(test)]

@@ -651,12 +651,12 @@ fn persist_with(
         && std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_file())
         && swap(tmp.path(), path).is_ok()
     {
-        // `tmp`'s path now names the old file: remove it. (Were `path`
-        // replaced by a directory between the check and the exchange, this
-        // fails on the directory, which is left beside the output and named
-        // in the error.)
-        let old = tmp.path().to_path_buf();
-        return tmp.close().map_err(|e| Error::io(&old, e));
+        // `tmp`'s path now names the old file: remove it, beside the
+        // batch's other builds when this thread has a `removals::Remover`.
+        // (Were `path` replaced by a directory between the check and the
+        // exchange, this fails on the directory, which is left beside the
+        // output and named in the error.)
+        return crate::removals::remove_old(path, tmp.into_temp_path());
     }
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())

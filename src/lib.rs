@@ -19,6 +19,7 @@ pub mod load;
 pub mod multiplicity;
 mod position_index;
 pub mod quantize;
+pub mod removals;
 pub mod report;
 pub mod shadow;
 pub mod topology;

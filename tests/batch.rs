@@ -295,3 +295,86 @@ fn grid_with_fins(n: usize) -> String {
     }
     s
 }
+
+/// Rebuilding a batch over its own outputs: every build swaps its new
+/// output in and hands the old file to the batch's removing thread
+/// (`removals::Remover`), which the command waits for. Every output must
+/// hold the new bytes (those of a fresh single build), a hard link to an
+/// old output its old bytes, and no temp file may be left, with one job
+/// or several.
+#[cfg(unix)]
+#[test]
+fn rebuilding_a_batch_in_place_replaces_every_output_and_leaves_no_temp_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let objs: Vec<(&str, Vec<u8>)> = common::fixtures()
+        .into_iter()
+        .filter(|(name, _)| name.ends_with(".obj"))
+        .collect();
+    assert!(objs.len() >= 3);
+    // The second inputs have the first ones' names and the next one's bytes.
+    let (first, second) = (tmp.path().join("first"), tmp.path().join("second"));
+    std::fs::create_dir_all(&first).unwrap();
+    std::fs::create_dir_all(&second).unwrap();
+    for (i, (name, data)) in objs.iter().enumerate() {
+        std::fs::write(first.join(name), data).unwrap();
+        std::fs::write(second.join(name), &objs[(i + 1) % objs.len()].1).unwrap();
+    }
+    let inputs = |dir: &std::path::Path| -> Vec<std::path::PathBuf> {
+        objs.iter().map(|(n, _)| dir.join(n)).collect()
+    };
+    let stem = |name: &str| name.trim_end_matches(".obj").to_string();
+    for jobs in ["1", "2"] {
+        let out = tmp.path().join(format!("out{jobs}"));
+        let links = tmp.path().join(format!("links{jobs}"));
+        std::fs::create_dir_all(&links).unwrap();
+        let batch = |dir: &std::path::Path| {
+            svpack()
+                .arg("build")
+                .args(inputs(dir))
+                .arg("-o")
+                .arg(&out)
+                .arg(format!("--jobs={jobs}"))
+                .arg("-q")
+                .assert()
+                .code(0);
+        };
+        batch(&first);
+        let mut old = Vec::new();
+        for (name, _) in &objs {
+            let o = out.join(format!("{}.svpk", stem(name)));
+            old.push(std::fs::read(&o).unwrap());
+            std::fs::hard_link(&o, links.join(stem(name))).unwrap();
+        }
+        batch(&second);
+        for ((name, _), old) in objs.iter().zip(&old) {
+            let fresh = tmp.path().join("fresh.svpk");
+            let _ = std::fs::remove_file(&fresh);
+            svpack()
+                .arg("build")
+                .arg(second.join(name))
+                .arg("-o")
+                .arg(&fresh)
+                .arg("-q")
+                .assert()
+                .code(0);
+            let now = std::fs::read(out.join(format!("{}.svpk", stem(name)))).unwrap();
+            assert!(now == std::fs::read(&fresh).unwrap(), "{name}: new bytes");
+            assert!(now != *old, "{name}: the inputs differ");
+            assert!(
+                std::fs::read(links.join(stem(name))).unwrap() == *old,
+                "{name}: old file kept by its link"
+            );
+        }
+        let mut names: Vec<String> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        let mut want: Vec<String> = objs
+            .iter()
+            .map(|(n, _)| format!("{}.svpk", stem(n)))
+            .collect();
+        want.sort();
+        assert_eq!(names, want, "--jobs={jobs}: no temp file left");
+    }
+}

@@ -1,0 +1,96 @@
+#!/usr/bin/env python3
+"""Rebuilding in place against building fresh, for two svpack binaries.
+
+Usage: python3 benches/rebuild.py OLD NEW INPUT [COPIES] [ROUNDS]
+
+Builds COPIES copies of INPUT (default 6) as one batch into an output
+directory, ROUNDS times (default 8) per binary, the binaries alternating
+and swapping order every round. Each round times, by wall clock around the
+whole command:
+  fresh  the batch into an empty directory (`sync` first);
+  over   the same batch again over those outputs once they are written
+         back (`sync` between), as a pipeline that rebuilds its assets
+         finds them.
+Prints the fastest and the median of each, checks that both binaries'
+outputs are the same bytes and that no temp file is left beside them
+(exit status 1 otherwise).
+
+Why: on a filesystem mounted with `discard` (this machine's ext4) removing
+a written-back output waits for the device to discard its blocks (27 ms
+for the dragon's 120 MiB), and a build that replaces an output removes
+the old one (benches/ROUNDS.md, Twentieth round).
+"""
+import filecmp
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+
+def run(binary, inputs, out):
+    start = time.perf_counter()
+    subprocess.run([binary, "build", *inputs, "-o", out, "--quiet"],
+                   check=True, stdout=subprocess.DEVNULL)
+    return (time.perf_counter() - start) * 1e3
+
+
+def main():
+    if len(sys.argv) < 4:
+        sys.exit(__doc__)
+    old, new, src = sys.argv[1:4]
+    copies = int(sys.argv[4]) if len(sys.argv) > 4 else 6
+    rounds = int(sys.argv[5]) if len(sys.argv) > 5 else 8
+    work = tempfile.mkdtemp(prefix="svpack-rebuild-", dir=".")
+    ok = True
+    try:
+        ext = os.path.splitext(src)[1]
+        inputs = []
+        for i in range(copies):
+            path = os.path.join(work, f"in{i}{ext}")
+            shutil.copyfile(src, path)
+            inputs.append(path)
+        times = {b: {"fresh": [], "over": []} for b in ("old", "new")}
+        # One input builds into a file, several into a directory.
+        outs = {b: os.path.join(work, f"out-{b}" + ("" if copies > 1 else ".svpk"))
+                for b in ("old", "new")}
+        for r in range(rounds):
+            order = [("old", old), ("new", new)]
+            if r % 2:
+                order.reverse()
+            for name, binary in order:
+                shutil.rmtree(outs[name], ignore_errors=True)
+                if os.path.isfile(outs[name]):
+                    os.remove(outs[name])
+                subprocess.run(["sync"], check=True)
+                times[name]["fresh"].append(run(binary, inputs, outs[name]))
+                subprocess.run(["sync"], check=True)
+                times[name]["over"].append(run(binary, inputs, outs[name]))
+                beside = outs[name] if copies > 1 else work
+                left = [f for f in os.listdir(beside) if f.startswith(".svpack-")]
+                if left:
+                    print(f"{name}: temp files left: {left}")
+                    ok = False
+        pairs = ([(os.path.join(outs["old"], f), os.path.join(outs["new"], f))
+                  for f in sorted(os.listdir(outs["old"]))]
+                 if copies > 1 else [(outs["old"], outs["new"])])
+        for a, b in pairs:
+            if not filecmp.cmp(a, b, shallow=False):
+                print(f"outputs differ: {a} {b}")
+                ok = False
+        print(f"{copies} copies of {src}, {rounds} rounds, wall ms, fastest / median")
+        print("| binary | fresh | over the written-back outputs |")
+        print("|---|---:|---:|")
+        for name in ("old", "new"):
+            t = times[name]
+            print(f"| {name} | {min(t['fresh']):.0f} / {statistics.median(t['fresh']):.0f} "
+                  f"| {min(t['over']):.0f} / {statistics.median(t['over']):.0f} |")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    sys.exit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()
