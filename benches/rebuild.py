@@ -17,7 +17,8 @@ outputs are the same bytes and that no temp file is left beside them
 
 Why: on a filesystem mounted with `discard` (this machine's ext4) removing
 a written-back output waits for the device to discard its blocks (27 ms
-for the dragon's 120 MiB), and a build that replaces an output removes
+for the dragon's 120 MiB, `cargo run --release --example stage_probe --
+replace DIR`), and a build that replaces an output removes
 the old one (benches/ROUNDS.md, Twentieth round).
 """
 import filecmp

@@ -3,7 +3,8 @@
 //! Rebuilding in place swaps the new output in and then removes the old
 //! file (`format::persist`). On a filesystem mounted with `discard` (ext4
 //! here, as some cloud images are) that removal waits for the device to
-//! discard the old file's blocks: 27 ms for the dragon's 120 MiB here,
+//! discard the old file's blocks: 27 ms for the dragon's 120 MiB here
+//! (`cargo run --release --example stage_probe -- replace DIR`),
 //! with the thread asleep in `blkdev_issue_discard` under `unlinkat`
 //! (5.5 ms of CPU). A build thread that waits there builds nothing, so a
 //! batch hands its old files to one thread of its own ([`Remover`]) and
