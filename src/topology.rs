@@ -9,9 +9,10 @@
 //!
 //! Method: every triangle is listed (by its other two corners, 8 bytes)
 //! under the two corners that are the smaller endpoint of one of its edges,
-//! by a counting sort on the dense vertex ids; then, vertex by vertex, the
-//! listings are read back and that vertex's edges sorted by larger endpoint,
-//! a handful of records on real meshes (the vertex valence). See
+//! appended to the range of 8,192 vertices the corner falls in; then, range
+//! by range, the listings are put in vertex order in a buffer that stays in
+//! the cache, and vertex by vertex that vertex's edges sorted by larger
+//! endpoint, a handful of records on real meshes (the vertex valence). See
 //! [`build_edges`].
 
 use std::mem::MaybeUninit;
@@ -66,29 +67,41 @@ impl Edges {
 /// endpoint: edges come out sorted by (a, b), each with its opposite
 /// vertices in triangle order.
 ///
-/// 1. **Count** the listings per vertex (triangles cut into one chunk per
-///    thread, each with its own counts). The counters of the triangle
-///    `AHEAD` triangles on are prefetched (in pass 2, 2·`AHEAD` on): the
-///    counts (4 bytes per vertex) outgrow L2 on large meshes and the
-///    corners are scattered (0.80–0.95 of the time without, dragon and 1M
-///    scene, 1 and 2 threads, in an interleaved comparison not kept in the
-///    repo). Pass 2 also prefetches the list slots it will write `AHEAD`
-///    triangles on: 12.9–13.2 → 10.9–11.1 ms on the dragon, one thread
-///    (local timers, benches/ROUNDS.md, "Ninth round").
+/// 1. **Count** the listings and records per range of `RANGE` vertices
+///    (triangles cut into one chunk per thread, each with its own counts,
+///    in four lanes: see the pass).
 /// 2. **List** every triangle under its `lo` and `mid` by the pair of its
 ///    other two corners: `[mid, hi]` under `lo`, `[hi, lo]` under `mid`
-///    (8 bytes per listing, 2 per triangle; the pair's order tells the two
-///    kinds apart), and with `opp_tri` also its id in a second list. Chunk
-///    `c` writes after chunks `0..c` in every vertex's list, so lists are in
-///    triangle order whatever the number of chunks.
+///    (2 listings per triangle; the pair's order tells the two kinds
+///    apart), and with `opp_tri` also its id in a second list. A listing
+///    is appended to its vertex's range, packed with the vertex's place in
+///    the range into 8 bytes (`Entry`; 12 bytes over 2^25 vertices), so
+///    the pass writes one stream per range. Chunk `c` writes after chunks
+///    `0..c` in every range, so each vertex's listings are in triangle
+///    order whatever the number of chunks.
+///
+///    Why ranges and not each vertex's own list (the method until the
+///    twenty-first round, with the counts per vertex): the lists are 16
+///    bytes per triangle, 80 MB on a 5M-triangle scene, and filling them
+///    vertex by vertex is two scattered writes per triangle (and two
+///    scattered counter updates in each of passes 1 and 2), which stay in
+///    the caches on the dragon but not on larger meshes: 5M scene, one
+///    thread, passes 1–3 149–155 → 121–123 ms, two threads 85 → 71 ms, the
+///    dragon 19.6–19.7 → 17.2–21.4 ms (`RECYCLE=1 cargo run --release
+///    --example stage_probe -- passes`, benches/ROUNDS.md "Twenty-first
+///    round").
 /// 3. **Emit**, one group of consecutive vertices per thread (groups cut at
 ///    multiples of `RANGE` vertices so they hold about equal numbers of
-///    records, counted per range in pass 1): a vertex's listings are read in
+///    records, counted per range in pass 1), range by range: the range's
+///    listings put in vertex order by a counting sort on the place
+///    (`sort_range`, in a buffer of the job's that stays in L2), then a
+///    vertex's listings are read in
 ///    order, each giving its edge records at that vertex (the listing, and
 ///    under `lo` also the swapped pair) without reading the triangle, its
 ///    few edge records sorted by larger endpoint, stably (`sort_small`, a
 ///    sorting network), its opposite vertices written over the group's own
-///    listings, already read (8 bytes a listing, at most two records of 4),
+///    listings, already read (8 or 12 bytes a listing, at most two records
+///    of 4),
 ///    its triangles straight to their final place, and its edges one after
 ///    the other from the group's first record's offset (edges never
 ///    outnumber records). Where the CPU has AVX-512, a vertex with at most
@@ -117,7 +130,15 @@ impl Edges {
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<true>(triangles, vertex_count, chunks_for(triangles), false, None).0
+    build_edges_in::<true>(
+        triangles,
+        vertex_count,
+        chunks_for(triangles),
+        false,
+        false,
+        None,
+    )
+    .0
 }
 
 /// [`build_edges`] without `opp_tri` (left empty): what a build needs, since
@@ -131,6 +152,7 @@ pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edg
         vertex_count,
         chunks_for(triangles),
         simd_available(),
+        false,
         None,
     )
     .0
@@ -154,6 +176,7 @@ pub fn build_edges_opposites_only_fed(
         vertex_count,
         chunks_for(triangles),
         simd_available(),
+        false,
         Some(consumer),
     )
     .0
@@ -170,6 +193,7 @@ pub fn build_edges_opposites_only_timed(
         vertex_count,
         chunks_for(triangles),
         simd_available(),
+        false,
         None,
     )
 }
@@ -205,6 +229,7 @@ fn build_edges_in<const TRI: bool>(
     vertex_count: usize,
     chunks: usize,
     simd: bool,
+    wide: bool,
     consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
 ) -> (Edges, PassTimes) {
     use rayon::prelude::*;
@@ -222,8 +247,7 @@ fn build_edges_in<const TRI: bool>(
     let per = tcount.div_ceil(chunks.max(1)).max(1);
     let tri_chunks: Vec<&[u32]> = triangles.chunks(3 * per).collect();
 
-    // Pass 1: listings per (chunk, vertex); listings and records
-    // (half-edges) per (chunk, range).
+    // Pass 1: listings and records (half-edges) per (chunk, range).
     // Fed, pass 1 also XORs a key of every edge of every triangle: an
     // edge on an even number of triangles cancels out, so a nonzero result
     // means some edge has an odd opposite count, 1 (open) most often. The
@@ -235,25 +259,18 @@ fn build_edges_in<const TRI: bool>(
     // guess is checked where the file is finished.
     let parity = consumer.is_some();
     let odd_edges = std::sync::atomic::AtomicU64::new(0);
-    let mut counts: Vec<(Vec<u32>, Vec<u64>)> = tri_chunks
+    let counts: Vec<Vec<u64>> = tri_chunks
         .par_iter()
         .map(|tris| {
-            // Vertex v's count at v + 1 (see where `start` is taken).
-            // Rounded up to a large block (`alloc::large_capacity`): the
-            // soup's freed blocks serve it, or huge pages.
-            let mut counts = crate::alloc::zeroed_large::<u32>(vertex_count + 1);
-            let c = &mut counts[1..];
-            let mut rr = vec![0u64; ranges];
+            // Four lanes per range, summed after the loop: a triangle's lo
+            // and mid, and consecutive triangles, mostly fall in one range,
+            // and each add to a counter waits for the one before (one lane:
+            // 3.2 against 2.2 ms on the dragon, 26 against 15 ms on the 5M
+            // scene, one thread, `stage_probe -- passes`).
+            let mut lanes = vec![0u64; 4 * ranges];
             let mut odd = 0u64;
             for (i, t) in tris.chunks_exact(3).enumerate() {
-                if let Some(f) = tris.get(3 * (i + AHEAD)..3 * (i + AHEAD) + 3) {
-                    for &x in f {
-                        crate::hint::prefetch(&c[x as usize]);
-                    }
-                }
                 let (lo, mid, hi) = sort3(t);
-                c[lo as usize] += 1;
-                c[mid as usize] += 1;
                 if parity {
                     let key = |a: u32, b: u32| {
                         ((u64::from(a) << 32) | u64::from(b)).wrapping_mul(0x9e37_79b9_7f4a_7c15)
@@ -263,12 +280,15 @@ fn build_edges_in<const TRI: bool>(
                 // Per range, listings in the high half and records in
                 // the low half: one add for both. All chunks together have
                 // fewer than 2^32 records (asserted above), so the low
-                // halves never carry, even summed over chunks.
-                rr[range_of(lo)] += (1 << 32) | 2;
-                rr[range_of(mid)] += (1 << 32) | 1;
+                // halves never carry, even summed over chunks and lanes.
+                let lane = 2 * (i & 1) * ranges;
+                lanes[lane + range_of(lo)] += (1 << 32) | 2;
+                lanes[lane + ranges + range_of(mid)] += (1 << 32) | 1;
             }
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
-            (counts, rr)
+            (0..ranges)
+                .map(|r| (0..4).map(|l| lanes[l * ranges + r]).sum())
+                .collect()
         })
         .collect();
     let consumer = consumer.filter(|_| odd_edges.into_inner() == 0);
@@ -276,126 +296,73 @@ fn build_edges_in<const TRI: bool>(
     let mut list_start = vec![0u32; ranges + 1];
     let mut rec_start = vec![0usize; ranges + 1];
     for r in 0..ranges {
-        let both: u64 = counts.iter().map(|(_, rr)| rr[r]).sum();
+        let both: u64 = counts.iter().map(|rr| rr[r]).sum();
         list_start[r + 1] = list_start[r] + (both >> 32) as u32;
         rec_start[r + 1] = rec_start[r] + (both & u64::from(u32::MAX)) as usize;
     }
-    let at = list_start[ranges];
-    // Each chunk's counts become the positions its listings go to:
-    // vertex-major, then chunk order. With several chunks, range by range
-    // in parallel, each from its own start: one thread took 0.65–0.72 ms
-    // of a two-thread build on the dragon, against 0.31 ms for one chunk
-    // (local timers).
-    if let [(c, _)] = &mut counts[..] {
-        let mut at = 0u32;
-        for k in &mut c[1..] {
-            (*k, at) = (at, at + *k);
-        }
-    } else if counts.len() > 1 {
-        let mut per_range: Vec<Vec<&mut [u32]>> = (0..ranges)
-            .map(|_| Vec::with_capacity(counts.len()))
-            .collect();
-        for (c, _) in counts.iter_mut() {
-            for (r, s) in c[1..].chunks_mut(RANGE).enumerate() {
-                per_range[r].push(s);
-            }
-        }
-        per_range
-            .into_par_iter()
-            .zip(&list_start[..ranges])
-            .for_each(|(mut cs, &from)| {
-                let mut at = from;
-                for v in 0..cs[0].len() {
-                    for c in cs.iter_mut() {
-                        (c[v], at) = (at, at + c[v]);
-                    }
-                }
-            });
-    }
+    let at = list_start[ranges] as usize;
 
     let counted = Instant::now();
-    // Pass 2: list each triangle under its lo and mid corners. The lists
-    // are allocated uninitialised: every slot is written exactly once below
-    // (checked after the pass in debug builds), and zeroing them first was
-    // a write of 14 MB on the dragon (or a fault per page on fresh memory).
-    let mut list: Vec<[u32; 2]> = Vec::with_capacity(at as usize);
-    let mut list_t: Vec<u32> = Vec::with_capacity(if TRI { at as usize } else { 0 });
+    // Pass 2: list each triangle under its lo and mid corners, appended to
+    // the corner's range. The listings are allocated uninitialised: every
+    // slot is written exactly once below (checked where pass 3 reads them,
+    // in debug builds), and zeroing them first was a write of 14 MB on the
+    // dragon (or a fault per page on fresh memory).
+    let bits = packed_bits(vertex_count).filter(|_| !wide);
+    let words = if bits.is_some() { 2 } else { 3 };
+    let mut list: Vec<u32> = Vec::with_capacity(words * at);
+    let mut list_t: Vec<u32> = Vec::with_capacity(if TRI { at } else { 0 });
     if cfg!(debug_assertions) {
-        list.spare_capacity_mut()
-            .fill(std::mem::MaybeUninit::new([UNWRITTEN; 2]));
+        list.spare_capacity_mut().fill(MaybeUninit::new(UNWRITTEN));
         list_t
             .spare_capacity_mut()
-            .fill(std::mem::MaybeUninit::new(UNWRITTEN));
+            .fill(MaybeUninit::new(UNWRITTEN));
     }
-    struct Out(*mut [u32; 2], *mut u32);
-    // SAFETY: shared only to write disjoint slots, see below.
-    unsafe impl Sync for Out {}
-    let out = Out(list.as_mut_ptr(), list_t.as_mut_ptr());
+    // Each chunk's next slot per range: the range's start, after the
+    // earlier chunks' listings in the range.
+    let mut heads: Vec<Vec<u32>> = Vec::with_capacity(counts.len());
+    let mut next = list_start[..ranges].to_vec();
+    for rr in &counts {
+        heads.push(next.clone());
+        for (h, &x) in next.iter_mut().zip(rr) {
+            *h += (x >> 32) as u32;
+        }
+    }
+    drop(counts);
+    let (list_at, list_t_at) = (list.as_mut_ptr() as usize, list_t.as_mut_ptr() as usize);
     tri_chunks
         .par_iter()
-        .zip(counts.par_iter_mut())
+        .zip(heads.par_iter_mut())
         .enumerate()
-        .for_each(|(ci, (tris, (fill, _)))| {
-            let out = &out;
-            // Vertex v's position at v + 1, as counted.
-            let fill = &mut fill[1..];
-            for (i, t) in tris.chunks_exact(3).enumerate() {
-                // Two stages: the counters of the triangle 2·AHEAD on, and
-                // the list slots of the triangle AHEAD on, at the counters'
-                // values now (a triangle in between that moves a counter
-                // only makes the hint one listing early).
-                if let Some(f) = tris.get(3 * (i + 2 * AHEAD)..3 * (i + 2 * AHEAD) + 3) {
-                    for &x in f {
-                        crate::hint::prefetch(&fill[x as usize]);
+        .for_each(|(ci, (tris, head))| {
+            let first_id = (ci * per) as u32;
+            // SAFETY: chunk `ci` owns, in each range r, the slots from
+            // `head[r]` on, as many as pass 1 counted for it; these are
+            // disjoint across chunks and ranges and lie inside `list` (and
+            // `list_t` when TRI), sized for `at` entries.
+            unsafe {
+                match bits {
+                    Some(bits) => {
+                        list_ranges::<u64, TRI>(tris, first_id, head, bits, list_at, list_t_at)
+                    }
+                    None => {
+                        list_ranges::<[u32; 3], TRI>(tris, first_id, head, 0, list_at, list_t_at)
                     }
                 }
-                if let Some(f) = tris.get(3 * (i + AHEAD)..3 * (i + AHEAD) + 3) {
-                    let (lo, mid, _) = sort3(f);
-                    let slot = |v: u32| out.0.wrapping_add(fill[v as usize] as usize);
-                    crate::hint::prefetch_ptr(slot(lo));
-                    crate::hint::prefetch_ptr(slot(mid));
-                }
-                let id = (ci * per + i) as u32;
-                let (lo, mid, hi) = sort3(t);
-                let (at_lo, at_mid) = (fill[lo as usize] as usize, fill[mid as usize] as usize);
-                // SAFETY: chunk `ci` owns, for each vertex v, the slots
-                // fill[v] .. fill[v] + (its count of v), which pass 1
-                // counted exactly; these are disjoint across chunks and
-                // vertices and lie inside `list` (and `list_t` when TRI).
-                unsafe {
-                    out.0.add(at_lo).write([mid, hi]);
-                    out.0.add(at_mid).write([hi, lo]);
-                    if TRI {
-                        out.1.add(at_lo).write(id);
-                        out.1.add(at_mid).write(id);
-                    }
-                }
-                fill[lo as usize] += 1;
-                fill[mid as usize] += 1;
             }
         });
+    drop(heads);
     // SAFETY: pass 1 counted every slot pass 2 writes, so all are written.
     unsafe {
-        list.set_len(at as usize);
-        list_t.set_len(if TRI { at as usize } else { 0 });
+        list.set_len(words * at);
+        list_t.set_len(if TRI { at } else { 0 });
     }
-    // Debug builds check that no slot kept the sentinel (no vertex or
-    // triangle id is u32::MAX).
-    debug_assert!(list.iter().all(|l| *l != [UNWRITTEN; 2]));
-    debug_assert!(list_t.iter().all(|&t| t != UNWRITTEN));
-    // Where vertex v's listings start, `start[v]` (and `start[vertex_count]`
-    // is their number): the last chunk's positions after pass 2. Its
-    // listings of v end where v's listings end, and entry v + 1 has moved
-    // there; entry 0 was never moved. Why not an array of its own: 4 bytes
-    // per vertex of fresh memory (1.7 MB on the dragon, small pages).
-    // With no triangles there is no chunk, and no listing.
-    let start = counts
-        .pop()
-        .map_or_else(|| vec![0; vertex_count + 1], |(c, _)| c);
-    drop(counts);
-    debug_assert_eq!(start.len(), vertex_count + 1);
-    debug_assert!(start.windows(2).all(|w| w[0] <= w[1]) && start[vertex_count] == at);
-
+    let buckets = Buckets {
+        start: &list_start,
+        at: list_at,
+        tri: list_t_at,
+        bits,
+    };
     let listed = Instant::now();
     // Pass 3: the edges with their opposite vertices and triangles, one
     // job per group of consecutive ranges, the groups holding about equal
@@ -429,10 +396,10 @@ fn build_edges_in<const TRI: bool>(
     // its own listings, from their start, and pass 4 moves them down to
     // their final place. Why: it saves a buffer of 4 bytes per record
     // (10.5 MB of fresh memory on the dragon, a sixth of the build's peak).
-    // Why it is safe: a listing is 8 bytes and gives at most 2 records of
-    // 4, and a vertex's listings are all read (into `buf`) before its
-    // records are written, so a group's writes never reach a listing it
-    // has not read, nor another group's listings.
+    // Why it is safe: a listing is 8 or 12 bytes and gives at most 2
+    // records of 4, and a range's listings are all read (into the job's
+    // scratch) before its records are written, so a group's writes never
+    // reach a listing it has not read, nor another group's listings.
     let mut e = Edges {
         a: Vec::with_capacity(n),
         b: Vec::with_capacity(n),
@@ -440,15 +407,12 @@ fn build_edges_in<const TRI: bool>(
         opp: Vec::new(),
         opp_tri: Vec::with_capacity(if TRI { n } else { 0 }),
     };
-    // The listings, as an address (shared by the jobs, which read their
-    // own listings through it and write their own records over them).
-    let list_at = list.as_mut_ptr() as usize;
     // Where each group's records are written: the start of its listings,
-    // in u32 (two per listing).
-    let records_at = |g: usize| 2 * start[(group_start[g] * RANGE).min(vertex_count)] as usize;
+    // in u32 (`words` per listing).
+    let records_at = |g: usize| words * list_start[group_start[g]] as usize;
     let group_edges: Vec<usize> = if let Some(consumer) = consumer {
         debug_assert!(!TRI, "fed emits are opposites-only");
-        vec![emit_fed(&mut e, n, list_at, &start, simd, consumer)]
+        vec![emit_fed(&mut e, n, &buckets, vertex_count, simd, consumer)]
     } else {
         let rt = &mut e.opp_tri.spare_capacity_mut()[..if TRI { n } else { 0 }];
         let (ra, rb) = (
@@ -475,8 +439,8 @@ fn build_edges_in<const TRI: bool>(
         jobs.into_par_iter()
             .enumerate()
             .map_init(
-                Vec::new,
-                |buf: &mut Vec<[u32; 4]>, (g, [zero, ot, oa, ob, os])| {
+                Scratch::new,
+                |scratch: &mut Scratch, (g, [zero, ot, oa, ob, os])| {
                     if let [z] = zero {
                         *z = MaybeUninit::new(0);
                     }
@@ -496,13 +460,8 @@ fn build_edges_in<const TRI: bool>(
                         records: 0,
                         edges: 0,
                     };
-                    let listings = Listings {
-                        start: &start,
-                        at: list_at as *const [u32; 2],
-                        tri: &list_t,
-                    };
                     let (records, edges) =
-                        emit_group::<TRI>(out, &listings, first..last, buf, simd);
+                        emit_ranges::<TRI>(out, &buckets, first..last, scratch, simd);
                     // The group's records filled its `m` slots (and its range of
                     // `opp_tri`): pass 1 counted them.
                     assert_eq!(records, m, "topology: records miscounted");
@@ -528,7 +487,7 @@ fn build_edges_in<const TRI: bool>(
             let m = rec_start[group_start[g + 1]] - to;
             if from != to {
                 // SAFETY: both ranges lie in `list`'s allocation (from + m
-                // is at most twice the listings up to the group's end),
+                // is at most `words` u32 per listing up to the group's end),
                 // which nothing else touches now; `copy` allows the overlap.
                 unsafe {
                     std::ptr::copy(
@@ -564,10 +523,9 @@ fn build_edges_in<const TRI: bool>(
         );
     }
     let list = std::mem::ManuallyDrop::new(list);
-    // SAFETY: the allocation of `list` ([u32; 2] × capacity, align 4) is
-    // that of a Vec<u32> of twice the capacity; its first `n` u32 are the
-    // records, all written (asserted per group) and moved into place.
-    e.opp = unsafe { Vec::from_raw_parts(list_at as *mut u32, n, 2 * list.capacity()) };
+    // SAFETY: `list`'s first `n` u32 are the records, all written
+    // (asserted per group) and moved into place.
+    e.opp = unsafe { Vec::from_raw_parts(list_at as *mut u32, n, list.capacity()) };
     e.opp.shrink_to_fit();
     let at: usize = group_edges.iter().sum();
     // SAFETY: the records filled `opp_tri` (asserted per group);
@@ -591,6 +549,199 @@ fn build_edges_in<const TRI: bool>(
         compact: emitted.elapsed(),
     };
     (e, times)
+}
+
+/// Bits per vertex id in a packed listing (`u64` [`Entry`]): two ids and
+/// the listed vertex's place in its range must fit in 64 bits. None when
+/// the ids need more (over 2^25 vertices): the listings are then 12 bytes.
+fn packed_bits(vertex_count: usize) -> Option<u32> {
+    let bits = (usize::BITS - vertex_count.saturating_sub(1).leading_zeros()).max(1);
+    (2 * bits + RANGE_SHIFT <= 64).then_some(bits)
+}
+
+/// A listing as pass 2 appends it to its range: the pair `[p, q]` and the
+/// place in its range of the vertex it is listed under.
+trait Entry: Copy {
+    /// Vertex `v`'s listing `[p, q]`, ids of `bits` bits.
+    fn new(v: u32, p: u32, q: u32, bits: u32) -> Self;
+    /// The listed vertex's place in its range (below `RANGE`).
+    fn place(self) -> usize;
+    /// The pair, ids of `bits` bits.
+    fn pair(self, bits: u32) -> [u32; 2];
+    /// Whether this is the fill of debug builds' unwritten slots (all
+    /// ones), which no listing is: its two ids would be equal.
+    fn unwritten(self) -> bool;
+}
+
+/// 8 bytes, as the listings take in the end:
+/// `place << (64 - RANGE_SHIFT) | p << bits | q`.
+impl Entry for u64 {
+    #[inline(always)]
+    fn new(v: u32, p: u32, q: u32, bits: u32) -> Self {
+        (u64::from(v & (RANGE as u32 - 1)) << (64 - RANGE_SHIFT))
+            | (u64::from(p) << bits)
+            | u64::from(q)
+    }
+    #[inline(always)]
+    fn place(self) -> usize {
+        (self >> (64 - RANGE_SHIFT)) as usize
+    }
+    #[inline(always)]
+    fn pair(self, bits: u32) -> [u32; 2] {
+        let mask = (1u64 << bits) - 1;
+        [((self >> bits) & mask) as u32, (self & mask) as u32]
+    }
+    fn unwritten(self) -> bool {
+        self == u64::MAX
+    }
+}
+
+/// 12 bytes, `[v, p, q]`, for ids too wide to pack.
+impl Entry for [u32; 3] {
+    #[inline(always)]
+    fn new(v: u32, p: u32, q: u32, _: u32) -> Self {
+        [v, p, q]
+    }
+    #[inline(always)]
+    fn place(self) -> usize {
+        self[0] as usize & (RANGE - 1)
+    }
+    #[inline(always)]
+    fn pair(self, _: u32) -> [u32; 2] {
+        [self[1], self[2]]
+    }
+    fn unwritten(self) -> bool {
+        self == [UNWRITTEN; 3]
+    }
+}
+
+/// Pass 2 of [`build_edges`] for one chunk of triangles, the first with id
+/// `first_id`: `[mid, hi]` under lo and `[hi, lo]` under mid, each
+/// appended to its vertex's range at `head` (and its triangle id to the
+/// same slot of the ids at `tri_at` when TRI).
+///
+/// # Safety
+/// The slots from `head[r]` on, as many as the chunk lists in range `r`,
+/// must lie in the listings at `list_at` (entries of type `E`) and the ids
+/// at `tri_at`, and be written by no one else.
+unsafe fn list_ranges<E: Entry, const TRI: bool>(
+    tris: &[u32],
+    first_id: u32,
+    head: &mut [u32],
+    bits: u32,
+    list_at: usize,
+    tri_at: usize,
+) {
+    let (out, out_t) = (list_at as *mut E, tri_at as *mut u32);
+    // SAFETY (of the writes): the caller's.
+    let put = |s: usize, e: E, id: u32| unsafe {
+        out.add(s).write_unaligned(e);
+        if TRI {
+            out_t.add(s).write(id);
+        }
+    };
+    for (i, t) in tris.chunks_exact(3).enumerate() {
+        let id = first_id + i as u32;
+        let (lo, mid, hi) = sort3(t);
+        let (rl, rm) = ((lo >> RANGE_SHIFT) as usize, (mid >> RANGE_SHIFT) as usize);
+        if rl == rm {
+            // Most triangles: one update of the range's head for both
+            // (1.1–1.5 ms less on the dragon, one thread).
+            let s = head[rl] as usize;
+            head[rl] = s as u32 + 2;
+            put(s, E::new(lo, mid, hi, bits), id);
+            put(s + 1, E::new(mid, hi, lo, bits), id);
+        } else {
+            let s = head[rl] as usize;
+            head[rl] += 1;
+            put(s, E::new(lo, mid, hi, bits), id);
+            let s = head[rm] as usize;
+            head[rm] += 1;
+            put(s, E::new(mid, hi, lo, bits), id);
+        }
+    }
+}
+
+/// The listings pass 2 wrote, range after range, as pass 3 reads them.
+struct Buckets<'a> {
+    /// `start[r]..start[r + 1]` are range r's listings.
+    start: &'a [u32],
+    /// The listings' address (pass 3 writes records over them once read).
+    at: usize,
+    /// The address of their triangle ids (with TRI).
+    tri: usize,
+    /// Bits per id of the packed `u64` entries, or None for `[u32; 3]`.
+    bits: Option<u32>,
+}
+
+/// A pass 3 job's buffers: a range's listings in vertex order, their
+/// triangle ids, where each vertex's start, and `emit_vertex`'s records.
+struct Scratch {
+    pairs: Vec<[u32; 2]>,
+    tri: Vec<u32>,
+    start: Box<[u32; RANGE + 1]>,
+    records: Vec<[u32; 4]>,
+}
+
+impl Scratch {
+    fn new() -> Self {
+        Scratch {
+            pairs: Vec::new(),
+            tri: Vec::new(),
+            start: Box::new([0; RANGE + 1]),
+            records: Vec::new(),
+        }
+    }
+}
+
+/// Range `r`'s listings into `scratch` in vertex order, each vertex's in
+/// the order they were listed (so triangle order), with their triangle
+/// ids when TRI; `scratch.start[i]..scratch.start[i + 1]` are then the
+/// range's i-th vertex's. A counting sort on the place in the range: its
+/// counters (16 KB) stay in L1 and its output (about 128 KB) in L2.
+fn sort_range<E: Entry, const TRI: bool>(buckets: &Buckets, r: usize, scratch: &mut Scratch) {
+    let from = buckets.start[r] as usize;
+    let len = buckets.start[r + 1] as usize - from;
+    let bits = buckets.bits.unwrap_or(0);
+    // Entries are read unaligned: the listings are a Vec<u32> (their
+    // memory becomes `opp`), so a u64 entry may sit at a 4-byte boundary.
+    let entries = (buckets.at as *const E).wrapping_add(from);
+    // SAFETY (of every read below): pass 2 wrote the range's `len` entries
+    // (and ids) from `from` on, and no record has been written over them
+    // yet (the caller's order).
+    let entry = |j: usize| unsafe { entries.add(j).read_unaligned() };
+    let ids = (buckets.tri as *const u32).wrapping_add(from);
+    let start = &mut *scratch.start;
+    start.fill(0);
+    for j in 0..len {
+        start[entry(j).place() + 1] += 1;
+    }
+    for i in 1..=RANGE {
+        start[i] += start[i - 1];
+    }
+    let mut fill = [0u32; RANGE];
+    fill.copy_from_slice(&start[..RANGE]);
+    if scratch.pairs.len() < len {
+        scratch.pairs.resize(len, [0; 2]);
+    }
+    if TRI && scratch.tri.len() < len {
+        scratch.tri.resize(len, 0);
+    }
+    let (pairs, tri) = (&mut scratch.pairs[..len], &mut scratch.tri[..]);
+    for j in 0..len {
+        let e = entry(j);
+        debug_assert!(!e.unwritten(), "topology: listing not written");
+        let place = e.place();
+        let s = fill[place] as usize;
+        fill[place] += 1;
+        pairs[s] = e.pair(bits);
+        if TRI {
+            // SAFETY: as for the entries.
+            let id = unsafe { ids.add(j).read() };
+            debug_assert!(id != UNWRITTEN, "topology: listing not written");
+            tri[s] = id;
+        }
+    }
 }
 
 /// Edges as borrowed arrays, in the layout of [`Edges`] (without the
@@ -643,7 +794,7 @@ impl Edges {
 /// on another thread ([`build_edges_opposites_only_fed`]).
 ///
 /// The emit writes edge after edge, each with its opposite vertices, in
-/// their final places; after every step of 4,096 vertices it
+/// their final places; after every range of 8,192 vertices it
 /// publishes how many edges are done (a release store), and a reader that
 /// has seen that count (an acquire load) reads those edges while later
 /// ones are written after them: the writer never writes below the count
@@ -717,8 +868,8 @@ impl EmitFeed {
 }
 
 /// Vertices an [`EmitFeed`]'s emit pass does between two publications: a
-/// few thousand edges, so a reader waits little, and a hundred steps for
-/// the dragon's vertices.
+/// range (pass 3 sorts and emits whole ranges), some 20,000 edges, so a
+/// reader waits little, and 54 steps for the dragon's vertices.
 const FEED_STEP: usize = RANGE;
 
 /// Pass 3 of [`build_edges_in`] as one job in vertex order, with
@@ -729,14 +880,13 @@ const FEED_STEP: usize = RANGE;
 fn emit_fed(
     e: &mut Edges,
     n: usize,
-    list_at: usize,
-    start: &[u32],
+    buckets: &Buckets,
+    vertex_count: usize,
     simd: bool,
     consumer: &mut (dyn FnMut(&EmitFeed) + Send),
 ) -> usize {
     use std::sync::atomic::Ordering::Release;
-    let vertex_count = start.len() - 1;
-    let opp = list_at as *mut u32;
+    let opp = buckets.at as *mut u32;
     // Raw pointers only, taken once: the writer's views of each step are
     // made from them, past what it has published (see `EmitFeed`).
     let (a, b, s) = (
@@ -772,12 +922,7 @@ fn emit_fed(
             pointers.2 as *mut MaybeUninit<u32>,
             pointers.3 as *mut u32,
         );
-        let listings = Listings {
-            start,
-            at: list_at as *const [u32; 2],
-            tri: &[],
-        };
-        let mut buf = Vec::new();
+        let mut scratch = Scratch::new();
         let (mut records, mut edges) = (0usize, 0usize);
         let mut v = 0;
         while v < vertex_count {
@@ -799,7 +944,7 @@ fn emit_fed(
                     edges: 0,
                 }
             };
-            let (r, ne) = emit_group::<false>(out, &listings, v..next, &mut buf, simd);
+            let (r, ne) = emit_ranges::<false>(out, buckets, v..next, &mut scratch, simd);
             (records, edges) = (records + r, edges + ne);
             feed_ref.done.store(edges, Release);
             v = next;
@@ -834,8 +979,10 @@ struct GroupOut<'a> {
 
 /// The listings pass 2 wrote, as pass 3 reads them.
 struct Listings<'a> {
-    /// `start[v]..start[v + 1]` are vertex v's listings.
+    /// `start[v - first]..start[v - first + 1]` are vertex v's listings.
     start: &'a [u32],
+    /// The vertex `start` begins with.
+    first: usize,
     /// The listings, as an address: pass 3 writes records over those it has
     /// read.
     at: *const [u32; 2],
@@ -851,13 +998,69 @@ impl Listings<'_> {
     /// not be used once a record of `v` is written.
     #[inline(always)]
     unsafe fn of(&self, v: usize) -> (usize, &[[u32; 2]]) {
-        let (from, to) = (self.start[v] as usize, self.start[v + 1] as usize);
+        let (from, to) = (
+            self.start[v - self.first] as usize,
+            self.start[v - self.first + 1] as usize,
+        );
         // SAFETY: pass 2 wrote listings `from..to`; the caller keeps them
         // unchanged while the slice is used.
         (from, unsafe {
-            std::slice::from_raw_parts(self.at.add(from), to - from)
+            std::slice::from_raw_parts(self.at.wrapping_add(from), to - from)
         })
     }
+}
+
+/// Pass 3 for `vertices` (whole ranges, but for the last vertex's): each
+/// range's listings put in vertex order ([`sort_range`]), then its edges
+/// emitted from there; its records go to `out` after the ones before, over
+/// listings already read. Returns the numbers of records and edges written.
+fn emit_ranges<const TRI: bool>(
+    out: GroupOut,
+    buckets: &Buckets,
+    vertices: std::ops::Range<usize>,
+    scratch: &mut Scratch,
+    simd: bool,
+) -> (usize, usize) {
+    let GroupOut {
+        opp,
+        tri,
+        a,
+        b,
+        end,
+        base,
+        ..
+    } = out;
+    let (mut records, mut edges) = (0usize, 0usize);
+    let mut v = vertices.start;
+    while v < vertices.end {
+        let next = (v + RANGE).min(vertices.end);
+        let r = v >> RANGE_SHIFT;
+        match buckets.bits {
+            Some(_) => sort_range::<u64, TRI>(buckets, r, scratch),
+            None => sort_range::<[u32; 3], TRI>(buckets, r, scratch),
+        }
+        let o = GroupOut {
+            opp: opp.wrapping_add(records),
+            tri: if TRI { &mut tri[records..] } else { &mut [] },
+            a: &mut a[edges..],
+            b: &mut b[edges..],
+            end: &mut end[edges..],
+            base: base + records as u32,
+            records: 0,
+            edges: 0,
+        };
+        let listings = Listings {
+            start: &scratch.start[..],
+            first: v,
+            at: scratch.pairs.as_ptr(),
+            tri: &scratch.tri,
+        };
+        let (rn, en) = emit_group::<TRI>(o, &listings, v..next, &mut scratch.records, simd);
+        records += rn;
+        edges += en;
+        v = next;
+    }
+    (records, edges)
 }
 
 /// Pass 3 of [`build_edges`] for a group's `vertices`, with the AVX-512
@@ -1083,13 +1286,19 @@ unsafe fn emit_range_avx512(
         s
     };
     for v in vertices {
-        let (from, to) = (listings.start[v] as usize, listings.start[v + 1] as usize);
+        let (from, to) = (
+            listings.start[v - listings.first] as usize,
+            listings.start[v - listings.first + 1] as usize,
+        );
         let l = to - from;
         if l <= 8 {
             // SAFETY: the lanes loaded are listings `from..to` (the mask
             // keeps the others from being read), not yet written over.
             let x = unsafe {
-                _mm512_maskz_loadu_epi64(((1u32 << l) - 1) as u8, listings.at.add(from).cast())
+                _mm512_maskz_loadu_epi64(
+                    ((1u32 << l) - 1) as u8,
+                    listings.at.wrapping_add(from).cast(),
+                )
             };
             let swapped = _mm512_ror_epi64::<32>(x);
             // Word 2j is listing j's p (always a record's larger endpoint),
@@ -1188,10 +1397,6 @@ fn sort3(t: &[u32]) -> (u32, u32, u32) {
     (lo, a ^ b ^ c ^ lo ^ hi, hi)
 }
 
-/// How far ahead [`build_edges`] prefetches the counters of passes 1 and 2,
-/// in triangles.
-const AHEAD: usize = 16;
-
 /// What debug builds fill uninitialised buffers with, to check that every
 /// slot is written: no vertex, triangle or record index is `u32::MAX`.
 const UNWRITTEN: u32 = u32::MAX;
@@ -1252,10 +1457,13 @@ const NETWORK8: [&[(usize, usize)]; 6] = [
     &[(1, 2), (3, 4), (5, 6)],
 ];
 
-/// log2 of the vertices per range of pass 3 of [`build_edges`]: enough
-/// ranges for the threads to share, few enough that the per-range counts of
-/// pass 1 stay small.
-const RANGE_SHIFT: u32 = 12;
+/// log2 of the vertices per range of [`build_edges`]: enough ranges for
+/// the threads to share, few enough that pass 2 writes few streams at once
+/// (with 4,096 vertices per range its list pass took 37 ms on the 5M
+/// scene, with 16,384 30 ms, with 8,192 32 ms; the dragon 5.0, 4.7 and
+/// 4.0–4.6 ms; one thread, `stage_probe -- passes`), and small enough that
+/// a range's listings stay in L2 while pass 3 sorts and emits them.
+const RANGE_SHIFT: u32 = 13;
 /// Vertices per range.
 const RANGE: usize = 1 << RANGE_SHIFT;
 /// Below this many triangles the count and list passes run as one chunk:
@@ -1464,8 +1672,12 @@ mod tests {
         // so edges repeat (open, manifold and non-manifold edges,
         // duplicates in both windings), in every corner order, plus a
         // vertex with a large fan straddling the block-sort limit and one
-        // on a range boundary. Cut into 1 to 5 chunks, and through the
-        // public entry point with 1 to 4 threads (its chunks and groups).
+        // on a range boundary. Cut into 1 to 5 chunks, with listings of
+        // both widths, and through the public entry point with 1 to 4
+        // threads (its chunks and groups). Caught, among others: each
+        // chunk listing from its range's start (the earlier chunks'
+        // listings not skipped) and a range's counts one place off in
+        // `sort_range`.
         let vertices = 3 * RANGE + 77;
         let mut tris = strip_soup(vertices, PARALLEL_MIN + 5000, 0x9e37_79b9_7f4a_7c15);
         for i in 0..100u32 {
@@ -1500,17 +1712,19 @@ mod tests {
             opp_tri: Vec::new(),
             ..expected.clone()
         };
-        for chunks in 1..=5 {
+        // Both listing widths: packed (8 bytes) and, as over 2^26 vertices,
+        // 12 bytes.
+        for (chunks, wide) in (1..=5).flat_map(|c| [(c, false), (c, true)]) {
             same_edges(
-                &build_edges_in::<true>(&tris, vertices, chunks, false, None).0,
+                &build_edges_in::<true>(&tris, vertices, chunks, false, wide, None).0,
                 &expected,
-                &format!("{chunks} chunks"),
+                &format!("{chunks} chunks, wide {wide}"),
             );
             for simd in [false, simd_available()] {
                 same_edges(
-                    &build_edges_in::<false>(&tris, vertices, chunks, simd, None).0,
+                    &build_edges_in::<false>(&tris, vertices, chunks, simd, wide, None).0,
                     &without_tri,
-                    &format!("{chunks} chunks, opposites only, simd {simd}"),
+                    &format!("{chunks} chunks, opposites only, simd {simd}, wide {wide}"),
                 );
             }
         }
@@ -1537,17 +1751,52 @@ mod tests {
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(build_edges_opposites_only(&[], 5), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>(&tris[..3], vertices, 4, false, None).0,
+            build_edges_in::<true>(&tris[..3], vertices, 4, false, false, None).0,
             naive(&tris[..3])
         );
     }
 
-    /// Every sequence of up to 8 keys over a 3-letter alphabet (ties are
-    /// what stability is about) and over distinct large ids, against a
-    /// stable sort of the indices by key. Caught: a network missing its
-    /// last layer's (3, 4), and padding that sorts first (0 instead of
-    /// `u64::MAX`); both also fail the comparison with the obvious
-    /// implementation below.
+    /// Packed listings hold the widest ids their vertex count needs, and
+    /// wider counts get the 12-byte form. Caught: the place packed and read
+    /// two bits lower, over the pair's top bit (`64 - RANGE_SHIFT - 2`),
+    /// which no other test catches (their ids are narrow; the cases with
+    /// one field's low bit set against the other's top bit clear were
+    /// added for it), and packing allowed with one bit more than fits
+    /// (`2 * bits + RANGE_SHIFT <= 65`).
+    #[test]
+    fn listings_pack_every_id_their_vertex_count_allows() {
+        assert_eq!(packed_bits(0), Some(1));
+        assert_eq!(packed_bits(2), Some(1));
+        assert_eq!(packed_bits(3), Some(2));
+        let widest = (64 - RANGE_SHIFT) / 2;
+        assert_eq!(packed_bits(1 << widest), Some(widest));
+        assert_eq!(packed_bits((1 << widest) + 1), None);
+        for bits in 1..=widest {
+            let top = (1u64 << bits) as u32 - 1;
+            // Each field's top and bottom bits set against the others'
+            // clear, and the other way round.
+            let cases = [
+                (top, top, 0),
+                (0, top, 0),
+                (1, 0, top),
+                (0, 0, top),
+                (top, top - 1, top),
+                (RANGE as u32, 1, 0),
+            ];
+            for (v, p, q) in cases {
+                let e = u64::new(v, p, q, bits);
+                assert_eq!(e.place(), v as usize % RANGE, "bits {bits}, {v} {p} {q}");
+                assert_eq!(e.pair(bits), [p, q], "bits {bits}, {v} {p} {q}");
+                assert!(!e.unwritten());
+            }
+        }
+        let e = <[u32; 3]>::new(u32::MAX - 1, u32::MAX - 2, 7, 0);
+        assert_eq!(
+            (e.place(), e.pair(0)),
+            ((u32::MAX - 1) as usize % RANGE, [u32::MAX - 2, 7])
+        );
+    }
+
     /// The fed emit (`build_edges_opposites_only_fed`): every prefix the
     /// consumer is handed, read while the rest is being made, is the final
     /// edges' prefix, and the edges are the unfed ones; a mesh with an edge
@@ -1610,6 +1859,12 @@ mod tests {
         }
     }
 
+    /// Every sequence of up to 8 keys over a 3-letter alphabet (ties are
+    /// what stability is about) and over distinct large ids, against a
+    /// stable sort of the indices by key. Caught: a network missing its
+    /// last layer's (3, 4), and padding that sorts first (0 instead of
+    /// `u64::MAX`); both also fail the comparison with the obvious
+    /// implementation below.
     #[test]
     fn sort_small_is_a_stable_sort_by_larger_endpoint() {
         let check = |keys: &[u32]| {
