@@ -86,10 +86,11 @@ impl Edges {
 ///    vertex by vertex is two scattered writes per triangle (and two
 ///    scattered counter updates in each of passes 1 and 2), which stay in
 ///    the caches on the dragon but not on larger meshes: 5M scene, one
-///    thread, passes 1–3 149–155 → 121–123 ms, two threads 85 → 71 ms, the
-///    dragon 19.6–19.7 → 17.2–21.4 ms (`RECYCLE=1 cargo run --release
-///    --example stage_probe -- passes`, benches/ROUNDS.md "Twenty-first
-///    round").
+///    thread, passes 1–3 146–165 → 108–116 ms, two threads 81–83 → 70–73
+///    ms; the dragon 17.6–18.7 → 17.4–19.2 ms, where the counting and
+///    listing gain what the range sort costs (`RECYCLE=1 cargo run
+///    --release --example stage_probe -- passes`, benches/ROUNDS.md
+///    "Twenty-first round").
 /// 3. **Emit**, one group of consecutive vertices per thread (groups cut at
 ///    multiples of `RANGE` vertices so they hold about equal numbers of
 ///    records, counted per range in pass 1), range by range: the range's
@@ -576,7 +577,7 @@ trait Entry: Copy {
     fn unwritten(self) -> bool;
 }
 
-/// 8 bytes, as the listings take in the end:
+/// 8 bytes, as a listing took before it carried its place:
 /// `place << (64 - RANGE_SHIFT) | p << bits | q`.
 impl Entry for u64 {
     #[inline(always)]
@@ -697,7 +698,8 @@ impl Scratch {
 /// the order they were listed (so triangle order), with their triangle
 /// ids when TRI; `scratch.start[i]..scratch.start[i + 1]` are then the
 /// range's i-th vertex's. A counting sort on the place in the range: its
-/// counters (16 KB) stay in L1 and its output (about 128 KB) in L2.
+/// counters (32 KB, and as many to fill from) and its output (256 KB for
+/// the dragon's average range) stay in L2.
 fn sort_range<E: Entry, const TRI: bool>(buckets: &Buckets, r: usize, scratch: &mut Scratch) {
     let from = buckets.start[r] as usize;
     let len = buckets.start[r + 1] as usize - from;
@@ -873,9 +875,9 @@ const FEED_STEP: usize = RANGE;
 
 /// Pass 3 of [`build_edges_in`] as one job in vertex order, with
 /// `consumer` beside it reading the finished prefix (see [`EmitFeed`]):
-/// the `n` records go over the listings at address `list_at` (vertex v's
-/// from `start[v]` on; from the first, as the first group's do) and the edges to the front of `e`'s arrays, all in
-/// their final places. Returns the number of edges.
+/// the `n` records go over the listings in `buckets` (from the first, as
+/// the first group's do) and the edges to the front of `e`'s arrays, all
+/// in their final places. Returns the number of edges.
 fn emit_fed(
     e: &mut Edges,
     n: usize,
@@ -976,43 +978,35 @@ struct GroupOut<'a> {
     edges: usize,
 }
 
-/// The listings pass 2 wrote, as pass 3 reads them.
+/// A range's listings in vertex order ([`sort_range`]), as pass 3's emit
+/// reads them.
 struct Listings<'a> {
     /// `start[v - first]..start[v - first + 1]` are vertex v's listings.
     start: &'a [u32],
     /// The vertex `start` begins with.
     first: usize,
-    /// The listings, as an address: pass 3 writes records over those it has
-    /// read.
-    at: *const [u32; 2],
+    /// The listings.
+    pairs: &'a [[u32; 2]],
     /// Each listing's triangle (empty without `opp_tri`).
     tri: &'a [u32],
 }
 
 impl Listings<'_> {
-    /// Vertex `v`'s first listing and its listings.
-    ///
-    /// # Safety
-    /// No record may have been written over them yet, and the slice must
-    /// not be used once a record of `v` is written.
+    /// Vertex `v`'s listings and where they start.
     #[inline(always)]
-    unsafe fn of(&self, v: usize) -> (usize, &[[u32; 2]]) {
-        let (from, to) = (
+    fn of(&self, v: usize) -> (usize, usize) {
+        (
             self.start[v - self.first] as usize,
             self.start[v - self.first + 1] as usize,
-        );
-        // SAFETY: pass 2 wrote listings `from..to`; the caller keeps them
-        // unchanged while the slice is used.
-        (from, unsafe {
-            std::slice::from_raw_parts(self.at.wrapping_add(from), to - from)
-        })
+        )
     }
 }
 
-/// Pass 3 for `vertices` (whole ranges, but for the last vertex's): each
-/// range's listings put in vertex order ([`sort_range`]), then its edges
-/// emitted from there; its records go to `out` after the ones before, over
-/// listings already read. Returns the numbers of records and edges written.
+/// Pass 3 for `vertices` (whole ranges; the last may end at the vertex
+/// count): each range's listings put in vertex order ([`sort_range`]),
+/// then its edges emitted from there; its records go to `out` after the
+/// ones before, over listings already read. Returns the numbers of
+/// records and edges written.
 fn emit_ranges<const TRI: bool>(
     out: GroupOut,
     buckets: &Buckets,
@@ -1051,7 +1045,7 @@ fn emit_ranges<const TRI: bool>(
         let listings = Listings {
             start: &scratch.start[..],
             first: v,
-            at: scratch.pairs.as_ptr(),
+            pairs: &scratch.pairs,
             tri: &scratch.tri,
         };
         let (rn, en) = emit_group::<TRI>(o, &listings, v..next, &mut scratch.records, simd);
@@ -1098,9 +1092,8 @@ fn emit_range<const TRI: bool>(
     buf: &mut Vec<[u32; 4]>,
 ) -> (usize, usize) {
     for v in vertices {
-        // SAFETY: vertices are emitted in order, and a vertex's records only
-        // reach listings already read (see where `e` is made).
-        let (from, listed) = unsafe { listings.of(v) };
+        let (from, to) = listings.of(v);
+        let listed = &listings.pairs[from..to];
         emit_vertex::<TRI>(&mut out, v as u32, from, listed, listings.tri, buf);
     }
     (out.records, out.edges)
@@ -1285,19 +1278,14 @@ unsafe fn emit_range_avx512(
         s
     };
     for v in vertices {
-        let (from, to) = (
-            listings.start[v - listings.first] as usize,
-            listings.start[v - listings.first + 1] as usize,
-        );
+        let (from, to) = listings.of(v);
         let l = to - from;
         if l <= 8 {
-            // SAFETY: the lanes loaded are listings `from..to` (the mask
-            // keeps the others from being read), not yet written over.
+            let listed = &listings.pairs[from..to];
+            // SAFETY: the lanes loaded are `listed`'s (the mask keeps the
+            // others from being read).
             let x = unsafe {
-                _mm512_maskz_loadu_epi64(
-                    ((1u32 << l) - 1) as u8,
-                    listings.at.wrapping_add(from).cast(),
-                )
+                _mm512_maskz_loadu_epi64(((1u32 << l) - 1) as u8, listed.as_ptr().cast())
             };
             let swapped = _mm512_ror_epi64::<32>(x);
             // Word 2j is listing j's p (always a record's larger endpoint),
@@ -1379,8 +1367,7 @@ unsafe fn emit_range_avx512(
             out.edges += edges;
             continue;
         }
-        // SAFETY: as in `emit_range`.
-        let (from, listed) = unsafe { listings.of(v) };
+        let listed = &listings.pairs[from..to];
         emit_vertex::<false>(&mut out, v as u32, from, listed, listings.tri, buf);
     }
     (out.records, out.edges)
