@@ -270,7 +270,8 @@ fn build_edges_in<const TRI: bool>(
             // one before. One lane: 2.7–3.2 against 2.1–2.2 ms on the
             // dragon, 26 against 15 ms on the 5M scene; the four lanes of a
             // range side by side: 24 ms on the scene (one thread,
-            // `stage_probe -- passes`).
+            // `stage_probe -- passes` on local edits, benches/ROUNDS.md
+            // "Twenty-first round").
             let mut lanes = vec![0u64; 4 * ranges];
             let mut odd = 0u64;
             for (i, t) in tris.chunks_exact(3).enumerate() {
@@ -652,7 +653,7 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
         // range, most triangles, measured no faster: the list pass 4.5–5.7
         // against 5.1–6.5 ms without on the dragon, 32.1–32.4 against
         // 30.3–32.8 ms on the 5M scene; one thread, `stage_probe --
-        // passes`, three alternations.)
+        // passes`, three alternations with a local edit.)
         let s = head[rl] as usize;
         head[rl] += 1;
         put(s, E::new(lo, mid, hi, bits), id);
@@ -1447,7 +1448,7 @@ const NETWORK8: [&[(usize, usize)]; 6] = [
 /// the threads to share, few enough that pass 2 writes few streams at once
 /// (with 4,096 vertices per range its list pass took 37 ms on the 5M
 /// scene, with 16,384 30 ms, with 8,192 32 ms; the dragon 5.0, 4.7 and
-/// 4.0–4.6 ms; one thread, `stage_probe -- passes`), and small enough that
+/// 4.0–4.6 ms; one thread, `stage_probe -- passes` on local edits), and small enough that
 /// a range's listings stay in L2 while pass 3 sorts and emits them.
 const RANGE_SHIFT: u32 = 13;
 /// Vertices per range.
