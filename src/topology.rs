@@ -1448,8 +1448,9 @@ const NETWORK8: [&[(usize, usize)]; 6] = [
 /// the threads to share, few enough that pass 2 writes few streams at once
 /// (with 4,096 vertices per range its list pass took 37 ms on the 5M
 /// scene, with 16,384 30 ms, with 8,192 32 ms; the dragon 5.0, 4.7 and
-/// 4.0–4.6 ms; one thread, `stage_probe -- passes` on local edits), and small enough that
-/// a range's listings stay in L2 while pass 3 sorts and emits them.
+/// 4.0–4.6 ms; one thread, `stage_probe -- passes` on local edits), and
+/// small enough that a range's listings stay in L2 while pass 3 sorts and
+/// emits them.
 const RANGE_SHIFT: u32 = 13;
 /// Vertices per range.
 const RANGE: usize = 1 << RANGE_SHIFT;
