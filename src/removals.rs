@@ -56,9 +56,8 @@ impl Remover {
                 for job in receiver {
                     match job {
                         Job::Remove { output, old } => {
-                            let path = old.to_path_buf();
-                            if let Err(e) = old.close() {
-                                failed.push((output, Error::io(&path, e)));
+                            if let Err(e) = remove(old) {
+                                failed.push((output, e));
                             }
                         }
                         Job::End => break,
@@ -103,12 +102,15 @@ pub(crate) fn remove_old(output: &Path, old: tempfile::TempPath) -> crate::error
     });
     match job {
         // No remover, or its thread is gone: remove it here.
-        Some(Job::Remove { old, .. }) => {
-            let path = old.to_path_buf();
-            old.close().map_err(|e| Error::io(&path, e))
-        }
+        Some(Job::Remove { old, .. }) => remove(old),
         _ => Ok(()),
     }
+}
+
+/// Removes `old`; an error names it.
+fn remove(old: tempfile::TempPath) -> crate::error::Result<()> {
+    let path = old.to_path_buf();
+    old.close().map_err(|e| Error::io(&path, e))
 }
 
 #[cfg(test)]
