@@ -175,6 +175,17 @@ fn passes(path: &Path) {
 /// gathers). The copy into the page cache carries the whole output through
 /// the caches, so the caps' scattered reads of the position table (5.2 MB)
 /// go to memory instead of L2 and L3 (benches/ROUNDS.md, fifteenth round).
+/// Where `fill-write`'s caps come from.
+#[derive(Clone, Copy, PartialEq)]
+enum Caps {
+    /// The welded mesh (`layout::Records`, what the probe timed first).
+    Welded,
+    /// No positions: each corner id stored where its position goes.
+    Stores,
+    /// The soup (`layout::SoupCaps`).
+    Soup,
+}
+
 fn fill_write(path: &Path) {
     use std::os::unix::fs::FileExt;
     use svpack::format::PayloadSource;
@@ -204,12 +215,14 @@ fn fill_write(path: &Path) {
             *slot = [v as f32, 0.0, 0.0, 1.0];
         }
     };
+    // The caps as a one-thread build makes them (`layout::SoupCaps`).
+    let soup_caps = svpack::layout::SoupCaps::new(&soup.positions, &soup.indices, &w);
     let file_path = Path::new(".svpack-fill-write.tmp");
     let total: usize = (0..units).map(|u| lens(u).iter().sum::<usize>()).sum();
     // (fill, caps fill, write) in ms for one round; with `gathers` None,
     // no fills at all: the same writes of a buffer no fill has just
     // passed through the caches.
-    let mut round = |write: bool, gathers: Option<bool>| {
+    let mut round = |write: bool, gathers: Option<Caps>| {
         let file = write.then(|| {
             let f = std::fs::File::create(file_path).unwrap();
             // Its blocks reserved first, as `format::write_file_streamed`
@@ -226,12 +239,11 @@ fn fill_write(path: &Path) {
             let t = Instant::now();
             let mut outs = svpack::format::split_pieces(&mut buf, &lens);
             let is_caps = lens[0] > 0;
-            if gathers.is_none() {
-                // No fill.
-            } else if is_caps && gathers == Some(false) {
-                caps_without_gathers(u, outs[0]);
-            } else {
-                records.fill(u, &mut outs);
+            match gathers {
+                None => {} // No fill.
+                Some(Caps::Stores) if is_caps => caps_without_gathers(u, outs[0]),
+                Some(Caps::Soup) if is_caps => soup_caps.fill(u, &mut outs),
+                Some(_) => records.fill(u, &mut outs),
             }
             let d = t.elapsed().as_secs_f64() * 1e3;
             fill += d;
@@ -253,10 +265,12 @@ fn fill_write(path: &Path) {
         [fill, caps, written]
     };
     for (write, gathers) in [
-        (false, Some(true)),
-        (true, Some(true)),
-        (false, Some(false)),
-        (true, Some(false)),
+        (false, Some(Caps::Welded)),
+        (true, Some(Caps::Welded)),
+        (false, Some(Caps::Stores)),
+        (true, Some(Caps::Stores)),
+        (false, Some(Caps::Soup)),
+        (true, Some(Caps::Soup)),
         (true, None),
     ] {
         let mut best = [f64::MAX; 3];
@@ -273,8 +287,9 @@ fn fill_write(path: &Path) {
                 "fills alone"
             },
             match gathers {
-                Some(true) => "",
-                Some(false) => ", caps without gathers",
+                Some(Caps::Welded) => "",
+                Some(Caps::Stores) => ", caps without gathers",
+                Some(Caps::Soup) => ", caps from the soup",
                 None => ", no fills (the writes alone)",
             },
             best[0],

@@ -56,11 +56,13 @@ pub struct Timings {
     pub load: f64,
     /// Quantising (unorm16 only) and welding.
     pub weld: f64,
-    /// Edges and opposite vertices, and their statistics; with two threads
-    /// or more on an uncompressed file with header room
-    /// (`format::header_room`), also the caps, written beside the edges,
-    /// and on a mesh whose every fan is even the side blocks written as
-    /// the edges are finished (`layout::write_sides_ahead`).
+    /// Edges and opposite vertices, and their statistics; on an
+    /// uncompressed file with header room (`format::header_room`), also
+    /// the caps (with one thread written from the soup before the edges
+    /// are made, `layout::SoupCaps`; with more, beside the edges), and with
+    /// two threads or more on a mesh whose every fan is even the side
+    /// blocks written as the edges are finished
+    /// (`layout::write_sides_ahead`).
     pub topology: f64,
     /// Buckets and splitting (the counting pass, [`Plan`]); with
     /// `--compress` also filling the sides and caps buffers.
@@ -416,12 +418,6 @@ pub fn build_file_with(
     let welded = timed_weld(&soup, false, &mut timings, stage);
     // (The one count of the soup the header needs that freeing it loses.)
     let input_triangles = soup.triangle_count();
-    // What the rest of the build does not read is freed before topology
-    // allocates, which then reuses those pages: the soup (the welded mesh
-    // replaces it). Faulting in pages the process has never touched is the
-    // slow part of a fresh buffer, especially in a VM (benches/ROUNDS.md,
-    // "Fifth round").
-    (soup.positions, soup.indices) = (Vec::new(), Vec::new());
     // The headers, with what the edges decide (statistics, buckets) and
     // the bounds still to come; their length is all `format::AheadFile` needs.
     let name = input
@@ -468,14 +464,16 @@ pub fn build_file_with(
         reserved: 0,
     };
     // The edges (only their opposite vertices: nothing reads the opposite
-    // vertices' triangles), and with two threads or more, an uncompressed
-    // file's caps written meanwhile (`format::AheadFile`): a file with
-    // header room (`format::header_room`) starts its payload at an offset
-    // the edges do not change (unless its mesh has more distinct opposite
-    // counts than the room holds: then the writer writes the caps again),
-    // and its side blocks as the edges are finished, where the first
-    // bucket is bucket 2. Why: benches/ROUNDS.md, "Eighteenth round" and
-    // "Nineteenth round".
+    // vertices' triangles), and an uncompressed file's caps written early
+    // (`format::AheadFile`): a file with header room
+    // (`format::header_room`) starts its payload at an offset the edges do
+    // not change (unless its mesh has more distinct opposite counts than
+    // the room holds: then the writer writes the caps again). With two
+    // threads or more the caps are written beside the edges, and the side
+    // blocks as the edges are finished, where the first bucket is bucket
+    // 2 (benches/ROUNDS.md, "Eighteenth round" and "Nineteenth round");
+    // with one, the caps are written from the soup before it is freed
+    // ("Twenty-second round").
     stage("topology");
     let i = Instant::now();
     let triangles = welded.triangle_count() as u64;
@@ -487,24 +485,41 @@ pub fn build_file_with(
         ..mesh_header.clone()
     };
     let ahead_wanted = !cfg.compress
-        && rayon::current_num_threads() >= 2
         && format::header_room(&Header {
             meshes: vec![early.clone()],
             ..header.clone()
         })?
         .is_some();
+    let two_threads = rayon::current_num_threads() >= 2;
     // What is left of the input's digest, hashed a slice at a time by
     // threads waiting to write (here, or while the file is written ahead).
     let digest = load::DigestSlices::new(digest);
     let ahead_file = ahead_wanted
         .then(|| format::AheadFile::new(output, header.clone(), early))
         .transpose()?;
+    // With one thread, the caps go into the file first, from the soup
+    // (`layout::SoupCaps`: its corners are near each other, the welded
+    // mesh's are not).
+    if let (Some(file), false) = (&ahead_file, two_threads) {
+        let caps = layout::SoupCaps::new(&soup.positions, &soup.indices, &welded);
+        file.reserve(0, file.sides_offset())?;
+        let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
+        file.write(&caps, 0, 0, file.caps_offset(), &mut bufs, &|| {
+            digest.step()
+        })?;
+    }
+    // What the rest of the build does not read is freed before topology
+    // allocates, which then reuses those pages: the soup (the welded mesh
+    // replaces it). Faulting in pages the process has never touched is the
+    // slow part of a fresh buffer, especially in a VM (benches/ROUNDS.md,
+    // "Fifth round").
+    (soup.positions, soup.indices) = (Vec::new(), Vec::new());
     // With a file to write ahead into, the side blocks are copied while the
     // edges are made (`layout::write_sides_ahead`) on the thread that
     // copied the caps.
     let mut sides_ahead = Ok(());
     let (edges, caps_ahead) = rayon::join(
-        || match &ahead_file {
+        || match ahead_file.as_ref().filter(|_| two_threads) {
             Some(file) => {
                 let mut consumer = |feed: &topology::EmitFeed| {
                     sides_ahead =
@@ -521,7 +536,7 @@ pub fn build_file_with(
             None => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         },
         || {
-            ahead_file.as_ref().map(|file| {
+            ahead_file.as_ref().filter(|_| two_threads).map(|file| {
                 let caps = layout::CapsRecords::new(&welded);
                 file.reserve(0, file.sides_offset())?;
                 let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);

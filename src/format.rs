@@ -449,8 +449,9 @@ pub const ROOM_HISTOGRAM_ENTRIES: usize = 64;
 /// is padded to it with [`Header::reserved`] (about 0.9 KB of zeros on the
 /// dragon), a longer one is written as it is. Why: with two threads the
 /// caps (a third of the file) are written while the edges are being made,
-/// which needs to know where the payload starts (benches/ROUNDS.md,
-/// "Eighteenth round").
+/// and with one thread before they are made, from the soup, which needs to
+/// know where the payload starts (benches/ROUNDS.md, "Eighteenth round"
+/// and "Twenty-second round").
 pub fn header_room(header: &Header) -> Result<Option<usize>> {
     let [mesh] = header.meshes.as_slice() else {
         return Ok(None);
@@ -913,9 +914,10 @@ struct Piece {
 /// The temp file that will become the output, with units of its payload
 /// written before the whole payload is known ([`AheadFile::new`]), at the
 /// offsets a file with header room ([`header_room`]) puts them: the caps
-/// while the edges are being made, and side blocks while the rest of the
-/// edges are. [`write_file_streamed_finishing`] keeps every piece that
-/// went where the final file puts it and writes the others again.
+/// while the edges are being made (with one thread, from the soup before
+/// they are made), and side blocks while the rest of the edges are.
+/// [`write_file_streamed_finishing`] keeps every piece that went where
+/// the final file puts it and writes the others again.
 ///
 /// Why: on ext4, writes into one file take the file's lock in turn, so the
 /// copy into the page cache is serial: with two threads, the write stage

@@ -22,6 +22,10 @@ pub struct Welded {
     pub source_triangle: Vec<u32>,
     /// Triangles dropped because two corners welded to the same position.
     pub degenerate: u64,
+    /// Their indices in the input soup, increasing (`degenerate` of them):
+    /// with it, a kept triangle's input triangle is found without
+    /// [`Welded::source_triangle`] (`layout::SoupCaps`).
+    pub dropped: Vec<u32>,
 }
 
 impl Welded {
@@ -649,6 +653,7 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
     let kept_triangles = triangle_count - degenerate as usize;
     close_up_blocks(&mut triangles, &dropped);
     triangles.truncate(3 * kept_triangles);
+    let dropped = dropped.concat();
     let source_triangle: Vec<u32> = if !sources {
         Vec::new()
     } else if degenerate == 0 {
@@ -656,7 +661,7 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
     } else {
         let mut source = Vec::with_capacity(kept_triangles);
         let mut begin = 0;
-        for end in dropped.concat().into_iter().chain([triangle_count as u32]) {
+        for &end in dropped.iter().chain(&[triangle_count as u32]) {
             source.extend(begin..end);
             begin = end + 1;
         }
@@ -696,6 +701,7 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
         triangles,
         source_triangle,
         degenerate,
+        dropped,
     }
 }
 
@@ -1010,6 +1016,7 @@ mod tests {
             let k = [key(c[0]), key(c[1]), key(c[2])];
             if k[0] == k[1] || k[1] == k[2] || k[0] == k[2] {
                 out.degenerate += 1;
+                out.dropped.push(t as u32);
             } else {
                 kept.push((t as u32, c));
                 for (k, &i) in k.into_iter().zip(c) {
@@ -1057,6 +1064,7 @@ mod tests {
             assert_eq!(w.triangles, expect.triangles, "{threads} threads");
             assert_eq!(w.source_triangle, expect.source_triangle);
             assert_eq!(w.degenerate, expect.degenerate);
+            assert_eq!(w.dropped, expect.dropped);
         }
         // Every finite vertex once, in input order: no degenerate triangle
         // (repeated positions aside) and fewer triangles than vertices, so

@@ -1,7 +1,8 @@
 //! Header room (format 2.1, `format::header_room`): a one-mesh file of at
 //! least `ROOM_MIN_TRIANGLES` triangles pads its header to a length its
-//! edges do not change, so that a build with two threads writes the caps
-//! while the edges are being made (`format::AheadFile`). A mesh with more
+//! edges do not change, so that a build writes the caps before the edges
+//! are made (`format::AheadFile`; with two threads beside the edges, with
+//! one from the soup). A mesh with more
 //! distinct opposite counts than the room holds is written without room,
 //! and the caps written early are written again. Either way the bytes must
 //! not depend on the thread count, and readers must check the room.

@@ -4,8 +4,8 @@
 //! while the rest of the edges are made, at the offset it has if the first
 //! bucket is bucket 2. The finishing writer keeps the blocks that went
 //! where the file puts them and writes the others again. Whatever the
-//! guess, the bytes must be those of a one-thread build, which writes
-//! nothing ahead.
+//! guess, the bytes must be those of a one-thread build, which writes no
+//! side block ahead (only the caps, from the soup).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

@@ -46,6 +46,93 @@ fn fan_grid(dir: &Path) -> PathBuf {
     p
 }
 
+/// A grid of at least `format::ROOM_MIN_TRIANGLES` triangles (so a file
+/// with header room, whose one-thread build writes the caps from the soup,
+/// `layout::SoupCaps`) with what the weld changes: coordinates of `-0`
+/// and `0` (one welded position, written `+0.0`), a copy of every 7th
+/// vertex that some triangles use instead, and degenerate triangles (a
+/// corner repeated, or a vertex and its copy) in runs at the start, at
+/// the end, and where the 16,384th and 32,768th kept triangles are, so
+/// that caps units start in and after a run of dropped ones.
+fn degenerate_grid(dir: &Path) -> PathBuf {
+    let n = 190;
+    let mut s = String::new();
+    let z = |i: usize, j: usize| match (i + j) % 5 {
+        0 => "-0".to_string(),
+        1 => "0".to_string(),
+        r => format!("{}", r as f32 * 0.25),
+    };
+    for j in 0..=n {
+        for i in 0..=n {
+            let x = if i == n / 2 {
+                "-0".to_string()
+            } else {
+                format!("{}", i as i64 - (n / 2) as i64)
+            };
+            let _ = writeln!(s, "v {x} {j} {}", z(i, j));
+        }
+    }
+    let id = |i: usize, j: usize| j * (n + 1) + i + 1;
+    // Copies of every 7th vertex, with the other zero's sign.
+    let mut copy = std::collections::HashMap::new();
+    let mut next = (n + 1) * (n + 1);
+    for j in 0..=n {
+        for i in 0..=n {
+            if id(i, j) % 7 == 0 {
+                next += 1;
+                let x = if i == n / 2 {
+                    "0".to_string()
+                } else {
+                    format!("{}", i as i64 - (n / 2) as i64)
+                };
+                let z = match z(i, j).as_str() {
+                    "-0" => "0".to_string(),
+                    "0" => "-0".to_string(),
+                    v => v.to_string(),
+                };
+                let _ = writeln!(s, "v {x} {j} {z}");
+                copy.insert(id(i, j), next);
+            }
+        }
+    }
+    let alt = |v: usize, t: usize| {
+        if t.is_multiple_of(2) {
+            *copy.get(&v).unwrap_or(&v)
+        } else {
+            v
+        }
+    };
+    let mut kept = 0;
+    let degenerate = |s: &mut String, count: usize| {
+        for d in 0..count {
+            let v = id(d % n, 3);
+            let w = *copy.get(&v).unwrap_or(&v);
+            let _ = writeln!(s, "f {v} {w} {}", id(d % n + 1, 4));
+            let _ = writeln!(s, "f {v} {} {v}", id(d % n, 5));
+        }
+    };
+    degenerate(&mut s, 3);
+    for j in 0..n {
+        for i in 0..n {
+            for t in [
+                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+            ] {
+                if kept == 16_384 - 2 || kept == 32_768 {
+                    degenerate(&mut s, 10);
+                }
+                let _ = writeln!(s, "f {} {} {}", alt(t[0], kept), t[1], alt(t[2], kept / 3));
+                kept += 1;
+            }
+        }
+    }
+    degenerate(&mut s, 2);
+    assert!(kept >= format::ROOM_MIN_TRIANGLES as usize);
+    let p = dir.join("degenerate_grid.obj");
+    std::fs::write(&p, s).unwrap();
+    p
+}
+
 /// Builds `input` both ways in a pool of `threads` threads and compares.
 fn check(input: &Path, dir: &Path, cfg: BuildConfig, threads: usize) {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -104,6 +191,32 @@ fn streamed_files_equal_whole_buffer_files() {
             }
         }
     }
+}
+
+/// The one-thread build of a file with header room takes its caps from
+/// the soup (`layout::SoupCaps`), the compressed one from the welded mesh.
+/// Caught: the soup's `-0.0` written as it is (no `+ 0.0`), and the
+/// dropped triangles not skipped (the caps' bytes differed both times).
+#[test]
+fn caps_from_the_soup_are_the_welded_caps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = degenerate_grid(tmp.path());
+    for positions in [Encoding::F32, Encoding::Unorm16] {
+        let cfg = BuildConfig {
+            positions,
+            ..BuildConfig::default()
+        };
+        check(&input, tmp.path(), cfg, 1);
+    }
+    let f = format::read_file(&tmp.path().join("streamed.svpk")).unwrap();
+    assert!(
+        f.header.reserved > 0,
+        "no header room: the soup's caps not used"
+    );
+    assert_eq!(
+        f.header.meshes[0].stats.degenerate_triangles,
+        2 * (3 + 10 + 10 + 2)
+    );
 }
 
 #[test]
