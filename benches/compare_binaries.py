@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """Alternates two svpack binaries on one input and compares their builds.
 
-Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] [--rest SECONDS] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
+Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] [--rest SECONDS] [--threads T[,T...]] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
 
 Each round runs `build INPUT -o FRESH --timings --threads T --json` with
-T = 1 and 2, the two binaries back to back in alternating order (this
+T = 1 and 2 (or the counts --threads lists), the two binaries back to back in alternating order (this
 machine drifts from minute to minute, so only interleaved runs are
 compared), with `sync` before each run and the output removed first (with
 --replace it is kept: each build replaces that binary's output of the
@@ -53,6 +53,11 @@ def main():
         i = args.index("--rest")
         rest = float(args[i + 1])
         del args[i:i + 2]
+    threads = (1, 2)
+    if "--threads" in args:
+        i = args.index("--threads")
+        threads = tuple(int(t) for t in args[i + 1].split(","))
+        del args[i:i + 2]
     args = [a for a in args if a not in ("--allow-different", "--replace")]
     if len(args) not in (3, 4):
         sys.exit(__doc__)
@@ -66,7 +71,7 @@ def main():
             for name in bins:
                 build(bins[name], inp, os.path.join(work, name + ".svpk"), 2)
         for r in range(rounds):
-            for t in (1, 2):
+            for t in threads:
                 outs = {}
                 for name in (["old", "new"] if r % 2 == 0 else ["new", "old"]):
                     outs[name] = os.path.join(work, name + ".svpk")
@@ -79,8 +84,16 @@ def main():
                     if not allow_different:
                         sys.exit(f"round {r}, {t} threads: the binaries wrote different files")
                     different += 1
+                # Both removed once compared (unless rebuilding in place):
+                # with the 5M scene's 720 MB outputs, a build that ran
+                # beside the other binary's output had a write stage 1.5–4×
+                # slower, whichever binary it was (benches/ROUNDS.md,
+                # Nineteenth and Twenty-second rounds).
+                if not replace:
+                    for o in outs.values():
+                        os.remove(o)
     if allow_different:
-        print(f"{different} of {2 * rounds} pairs of outputs differed")
+        print(f"{different} of {len(threads) * rounds} pairs of outputs differed")
     print("| binary | threads | whole build, fastest / median (ms) | after parsing, fastest / median (ms) "
           "| weld | topology | layout + write | peak memory (MiB) |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")

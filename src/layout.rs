@@ -16,7 +16,7 @@
 //! adds up to the edge's multiplicity.
 
 use crate::format::PayloadSource;
-use crate::hint::prefetch;
+use crate::hint::prefetch_whole;
 use crate::topology::{EdgeSlices, Edges, EmitFeed};
 use crate::weld::Welded;
 
@@ -256,9 +256,9 @@ fn fill_sides(
     let mut at = [0usize; MAX_MAX_MULT as usize + 1];
     for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
         if let (Some(&b), Some(&s)) = (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD)) {
-            prefetch(&pos[b as usize]);
+            prefetch_whole(&pos[b as usize]);
             for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
-                prefetch(&pos[o as usize]);
+                prefetch_whole(&pos[o as usize]);
             }
         }
         let a = pos[edges.a[e] as usize];
@@ -314,7 +314,7 @@ fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
     {
         if let Some(f) = ahead.get(3 * i..3 * i + 3) {
             for &v in f {
-                prefetch(&pos[v as usize]);
+                prefetch_whole(&pos[v as usize]);
             }
         }
         for (slot, &v) in rec.iter_mut().zip(c) {
