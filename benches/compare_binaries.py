@@ -85,10 +85,10 @@ def main():
                         sys.exit(f"round {r}, {t} threads: the binaries wrote different files")
                     different += 1
                 # Both removed once compared (unless rebuilding in place):
-                # with the 5M scene's 720 MB outputs, a build that ran
-                # beside the other binary's output had a write stage 1.5–4×
-                # slower, whichever binary it was (benches/ROUNDS.md,
-                # Nineteenth and Twenty-second rounds).
+                # kept until each binary's next build, the 5M scene's 720
+                # MB outputs made every write stage of the NEW slot slow
+                # (981 against 235 ms at the fastest in one run;
+                # benches/ROUNDS.md, Nineteenth and Twenty-second rounds).
                 if not replace:
                     for o in outs.values():
                         os.remove(o)
