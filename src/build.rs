@@ -502,11 +502,7 @@ pub fn build_file_with(
     // mesh's are not).
     if let (Some(file), false) = (&ahead_file, two_threads) {
         let caps = layout::SoupCaps::new(&soup.positions, &soup.indices, &welded);
-        file.reserve(0, file.sides_offset())?;
-        let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
-        file.write(&caps, 0, 0, file.caps_offset(), &mut bufs, &|| {
-            digest.step()
-        })?;
+        write_caps_ahead(file, &caps, &digest)?;
     }
     // What the rest of the build does not read is freed before topology
     // allocates, which then reuses those pages: the soup (the welded mesh
@@ -536,14 +532,10 @@ pub fn build_file_with(
             None => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         },
         || {
-            ahead_file.as_ref().filter(|_| two_threads).map(|file| {
-                let caps = layout::CapsRecords::new(&welded);
-                file.reserve(0, file.sides_offset())?;
-                let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
-                file.write(&caps, 0, 0, file.caps_offset(), &mut bufs, &|| {
-                    digest.step()
-                })
-            })
+            ahead_file
+                .as_ref()
+                .filter(|_| two_threads)
+                .map(|file| write_caps_ahead(file, &layout::CapsRecords::new(&welded), &digest))
         },
     );
     caps_ahead.transpose()?;
@@ -621,6 +613,19 @@ pub fn build_file_with(
         timings,
         warnings: soup.stats.warnings,
     })
+}
+
+/// Writes `caps` (one section, the units of `layout::CapsRecords`) into
+/// `file` where its caps go, its blocks up to the sides reserved first; a
+/// wait for the file hashes more of `digest`.
+fn write_caps_ahead(
+    file: &format::AheadFile,
+    caps: &dyn format::PayloadSource,
+    digest: &load::DigestSlices,
+) -> Result<()> {
+    file.reserve(0, file.sides_offset())?;
+    let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
+    file.write(caps, 0, 0, file.caps_offset(), &mut bufs, &|| digest.step())
 }
 
 /// The generator string written into headers: "svpack" and the crate version.
