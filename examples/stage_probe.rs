@@ -9,7 +9,7 @@
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld, memory recycled
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
-//! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills, with and without its writes, and its writes alone
+//! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
 //! cargo run --release --example stage_probe -- replace DIR   # putting a 120 MiB output in place
 //! ```
@@ -23,7 +23,8 @@
 //! round), `weld` (`weld::weld_without_sources` under an
 //! `alloc::KeepFreed` guard, thirteenth round) and `fill-write`
 //! (`format::split_pieces`, fifteenth round; its before figures came from
-//! this file built with the old prefetch distance instead). Since the
+//! this file built with the old prefetch distance instead; and
+//! `layout::SoupCaps`, twenty-second round). Since the
 //! seventeenth round `fill-write` reserves its file's blocks first, as the
 //! writer does; its write times from earlier rounds were into a file
 //! without them (slower by about 2 ms: `file_write` took 21.2–21.4 ms
