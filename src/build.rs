@@ -277,7 +277,7 @@ fn mesh_stats(
         input_triangles: input_triangles as u64,
         input_vertices: soup.input_vertices,
         welded_vertices: welded.positions.len() as u64,
-        degenerate_triangles: welded.degenerate,
+        degenerate_triangles: welded.degenerate(),
         skipped_points: soup.stats.skipped_points,
         skipped_lines: soup.stats.skipped_lines,
         triangles: welded.triangle_count() as u64,

@@ -353,7 +353,7 @@ pub fn lint_soup(file: &str, soup: &Soup, max_mult: u32) -> Vec<Finding> {
 
     // --- Weld and edges ----------------------------------------------------
     let welded = weld(&soup.positions, &finite_indices);
-    debug_assert_eq!(welded.degenerate, degenerate_count);
+    debug_assert_eq!(welded.degenerate(), degenerate_count);
     let input_tri = |wt: u32| finite_source[welded.source_triangle[wt as usize] as usize];
     let edges = build_edges(&welded.triangles, welded.positions.len());
 
