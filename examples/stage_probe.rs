@@ -162,6 +162,17 @@ fn passes(path: &Path) {
     );
 }
 
+/// Where `fill-write`'s caps come from.
+#[derive(Clone, Copy, PartialEq)]
+enum Caps {
+    /// The welded mesh (`layout::Records`, what the probe timed first).
+    Welded,
+    /// No positions: each corner id stored where its position goes.
+    Stores,
+    /// The soup (`layout::SoupCaps`).
+    Soup,
+}
+
 /// The streamed writer's fills (`format::write_file_streamed`), unit by
 /// unit in file order into one reused buffer as one thread runs them:
 /// alone, then with each unit written at its place in a new file in the
@@ -176,17 +187,6 @@ fn passes(path: &Path) {
 /// gathers). The copy into the page cache carries the whole output through
 /// the caches, so the caps' scattered reads of the position table (5.2 MB)
 /// go to memory instead of L2 and L3 (benches/ROUNDS.md, fifteenth round).
-/// Where `fill-write`'s caps come from.
-#[derive(Clone, Copy, PartialEq)]
-enum Caps {
-    /// The welded mesh (`layout::Records`, what the probe timed first).
-    Welded,
-    /// No positions: each corner id stored where its position goes.
-    Stores,
-    /// The soup (`layout::SoupCaps`).
-    Soup,
-}
-
 fn fill_write(path: &Path) {
     use std::os::unix::fs::FileExt;
     use svpack::format::PayloadSource;

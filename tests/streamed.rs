@@ -52,8 +52,9 @@ fn fan_grid(dir: &Path) -> PathBuf {
 /// and `0` (one welded position, written `+0.0`), a copy of every 7th
 /// vertex that some triangles use instead, and degenerate triangles (a
 /// corner repeated, or a vertex and its copy) in runs at the start, at
-/// the end, and where the 16,384th and 32,768th kept triangles are, so
-/// that caps units start in and after a run of dropped ones.
+/// the end, just before kept triangle 16,382 (caps unit 1 starts two
+/// kept triangles after it) and just before kept triangle 32,768 (the
+/// first of unit 2).
 fn degenerate_grid(dir: &Path) -> PathBuf {
     let n = 190;
     let mut s = String::new();
