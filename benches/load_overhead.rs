@@ -38,6 +38,7 @@ static ALLOC: svpack::alloc::HugePageAlloc = svpack::alloc::HugePageAlloc;
 mod scene;
 
 #[path = "common/peers.rs"]
+#[allow(dead_code)] // (The weld's peer is the stages bench's.)
 mod peers;
 
 /// Writes `soup` as a binary glTF: one buffer (positions as f32 VEC3, then

@@ -8,7 +8,9 @@
 //!   glTF the peer `load/gltf_crate/*`: the gltf crate's parse and its
 //!   accessor readers for every primitive's positions and indices;
 //! - `check/ours/*`: `build::check_soup` (indices in range, finite positions);
-//! - `weld/ours/*`: `weld::weld`;
+//! - `weld/ours/*`: `weld::weld`, and the peer `weld/peer_sort_unstable/*`:
+//!   the same vertices' 128-bit sort words sorted by the standard library's
+//!   `sort_unstable`, alone (`common/peers.rs`);
 //! - `topology/ours/*`: `topology::build_edges` (edges and all opposite
 //!   vertices), `topology/opposites_only/*` (the same without the opposite
 //!   vertices' triangles, as `svpack build` runs it), `topology/previous_sort/*` (the method it replaced,
@@ -100,6 +102,13 @@ fn prepare(name: &str, path: &Path, scratch: &Path) -> Mesh {
     assert!(
         topology_sort::build_edges(&welded.triangles, welded.positions.len()) == edges,
         "{name}: the previous topology method gives different edges"
+    );
+    assert!(
+        peers::welded_in_sorted_words(
+            &peers::sorted_vertex_words(&soup.positions),
+            &welded.positions
+        ),
+        "{name}: the weld's peer sorts its words into another order"
     );
     let layout = layout::layout(&welded, &edges, DEFAULT_MAX_MULT);
     // The header exactly as a default build writes it, so the write stage
@@ -194,6 +203,9 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     let mut g = group(c, "weld", m);
     g.bench_function(format!("ours/{n}"), |b| {
         b.iter(|| weld::weld(black_box(&m.soup.positions), black_box(&m.soup.indices)))
+    });
+    g.bench_function(format!("peer_sort_unstable/{n}"), |b| {
+        b.iter(|| peers::sorted_vertex_words(black_box(&m.soup.positions)))
     });
     g.finish();
 

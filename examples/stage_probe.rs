@@ -7,7 +7,7 @@
 //! ```text
 //! cargo run --release --example stage_probe -- read FILE     # read against map, first touch
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
-//! cargo run --release --example stage_probe -- weld MODEL    # the weld, memory recycled
+//! cargo run --release --example stage_probe -- weld MODEL    # the weld and its steps, memory recycled, and std's sort of its words
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
 //! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
@@ -21,7 +21,8 @@
 //! itself no longer makes. The exceptions, to delete for an earlier
 //! commit: `passes` (`topology::build_edges_opposites_only_timed`, eleventh
 //! round), `weld` (`weld::weld_without_sources` under an
-//! `alloc::KeepFreed` guard, thirteenth round) and `fill-write`
+//! `alloc::KeepFreed` guard, thirteenth round; its steps timed by
+//! `weld::weld_without_sources_timed`, twenty-third round) and `fill-write`
 //! (`format::split_pieces`, fifteenth round; its before figures came from
 //! this file built with the old prefetch distance instead; and
 //! `layout::SoupCaps`, twenty-second round). Since the
@@ -39,6 +40,10 @@
 
 use std::path::Path;
 use std::time::Instant;
+
+#[path = "../benches/common/peers.rs"]
+#[allow(dead_code)] // (Only the weld's peer is used here.)
+mod peers;
 
 #[global_allocator]
 static ALLOC: svpack::alloc::HugePageAlloc = svpack::alloc::HugePageAlloc;
@@ -97,12 +102,30 @@ fn main() {
 fn weld_recycled(path: &Path) {
     let _keep = svpack::alloc::KeepFreed::new();
     let soup = svpack::load::load(path).unwrap();
-    let (ms, w) = fastest(60, || {
-        svpack::weld::weld_without_sources(&soup.positions, &soup.indices)
-    });
+    // Fastest of 60 for the whole weld and for each step (not all from one
+    // run), then of 60 for the peer: the same vertices' sort words sorted
+    // by the standard library alone (`sorted_vertex_words`). Not
+    // alternated run by run: the peer's buffer then changed which blocks
+    // the weld got back, and the weld took 19 ms instead of 16.
+    let mut best = [f64::MAX; 5];
+    let mut kept = 0;
+    for _ in 0..60 {
+        let t = Instant::now();
+        let (w, s) = svpack::weld::weld_without_sources_timed(&soup.positions, &soup.indices);
+        let all = t.elapsed().as_secs_f64() * 1e3;
+        kept = w.triangle_count();
+        std::hint::black_box(w);
+        for (b, d) in best
+            .iter_mut()
+            .zip([all, s.sort, s.numbering, s.triangles, s.unused])
+        {
+            *b = b.min(d);
+        }
+    }
+    let (peer, _) = fastest(60, || peers::sorted_vertex_words(&soup.positions));
     println!(
-        "{} triangles: weld {ms:.2} ms, memory recycled",
-        w.triangle_count()
+        "{kept} triangles: weld {:.2} ms, memory recycled: sort {:.2}, numbering {:.2}, triangles {:.2}, unused {:.2} ms; the words sorted by sort_unstable alone {peer:.2} ms",
+        best[0], best[1], best[2], best[3], best[4]
     );
 }
 

@@ -513,10 +513,45 @@ pub fn weld_without_sources(positions: &[[f32; 3]], indices: &[u32]) -> Welded {
     weld_in(positions, indices, false)
 }
 
+/// [`weld_without_sources`], with the wall time of each of its steps (for
+/// `examples/stage_probe.rs`, which profiles them).
+pub fn weld_without_sources_timed(positions: &[[f32; 3]], indices: &[u32]) -> (Welded, StepTimes) {
+    let mut times = StepTimes::default();
+    let welded = weld_in_timed(positions, indices, false, &mut times);
+    (welded, times)
+}
+
+/// Wall time of each step of [`weld`], in ms (see `weld_in`'s steps).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StepTimes {
+    /// Step 1, sorting the vertices' words (`sort_vertices`).
+    pub sort: f64,
+    /// Step 2, numbering the runs of equal positions.
+    pub numbering: f64,
+    /// Step 3, the triangles in run ids, the dropped ones closed up (and
+    /// the sources, when asked for).
+    pub triangles: f64,
+    /// Step 4, dropping the runs no kept triangle uses.
+    pub unused: f64,
+}
+
 /// [`weld`], with [`Welded::source_triangle`] only when `sources`.
 fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
+    weld_in_timed(positions, indices, sources, &mut StepTimes::default())
+}
+
+/// [`weld_in`], its steps' times in `times`.
+fn weld_in_timed(
+    positions: &[[f32; 3]],
+    indices: &[u32],
+    sources: bool,
+    times: &mut StepTimes,
+) -> Welded {
     use rayon::prelude::*;
     use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+    use std::time::Instant;
+    let ms = |since: Instant| since.elapsed().as_secs_f64() * 1e3;
+    let started = Instant::now();
     let n = positions.len();
     let triangle_count = indices.len() / 3;
     // The output triangles, and until step 3 writes them, the sort's words
@@ -553,6 +588,8 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
 
     // 1. Sort all input vertices by position.
     let groups = sort_vertices(positions, words);
+    times.sort = ms(started);
+    let step = Instant::now();
 
     // 2. Number the runs of equal positions: `run[i]` is input vertex i's
     //    welded id before unused vertices are removed. A run's position is
@@ -616,6 +653,8 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
         run.set_len(n);
     }
     debug_assert!(run.iter().all(|r| r.load(Relaxed) != UNWRITTEN));
+    times.numbering = ms(step);
+    let step = Instant::now();
 
     // 3. Triangles in run ids, in place, in fixed blocks in parallel; the
     //    degenerate ones are listed (they are rare) and closed up after.
@@ -673,6 +712,9 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
         source
     };
 
+    times.triangles = ms(step);
+    let step = Instant::now();
+
     // 4. Drop unused runs (those no kept triangle references) and renumber
     //    densely; the order stays lexicographic. Usually every vertex is
     //    marked, which one scan shows.
@@ -700,6 +742,7 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
                 .for_each(|v| *v = rank[*v as usize]);
         }
     }
+    times.unused = ms(step);
 
     Welded {
         positions: out_positions,
@@ -1068,6 +1111,13 @@ mod tests {
             assert_eq!(w.source_triangle, expect.source_triangle);
             assert_eq!(w.degenerate(), expect.degenerate());
             assert_eq!(w.dropped, expect.dropped);
+            // The timed form (what `stage_probe -- weld` runs) welds the
+            // same, without sources.
+            let (t, _) = with_threads(threads, || weld_without_sources_timed(&pos, &idx));
+            assert!(t.positions == expect.positions, "{threads} threads, timed");
+            assert!(t.triangles == expect.triangles, "{threads} threads, timed");
+            assert!(t.dropped == expect.dropped, "{threads} threads, timed");
+            assert!(t.source_triangle.is_empty());
         }
         // Every finite vertex once, in input order: no degenerate triangle
         // (repeated positions aside) and fewer triangles than vertices, so

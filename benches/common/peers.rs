@@ -1,6 +1,7 @@
 //! The parsers our loaders sit on, called alone, as the peers of
 //! `svpack::load::load` in the stages and load-overhead benchmarks: what a
-//! loader that only wanted positions and indices would have to run anyway.
+//! loader that only wanted positions and indices would have to run anyway;
+//! and the standard library's sort as the peer of the weld's.
 
 use std::path::Path;
 
@@ -50,4 +51,51 @@ pub fn gltf_crate_load(path: &Path) -> (usize, usize) {
         }
     }
     (positions, indices)
+}
+
+/// The peer of `weld::weld` (the stages bench's `weld` group and
+/// `stage_probe -- weld`): the sort at the weld's heart done by the
+/// standard library. One 128-bit word per vertex, the order keys of its
+/// x, y and z above its index (as the weld makes them: `-0.0` as `+0.0`,
+/// then the sign bit flipped for positives and every bit for negatives),
+/// sorted by `sort_unstable`, and nothing else: no numbering, no
+/// triangles. Why: `weld` sorts with code of its own (a bucket sort on x,
+/// then counting passes and insertion sorts per bucket), and this says
+/// what the best general sort at hand costs for the sort alone.
+pub fn sorted_vertex_words(positions: &[[f32; 3]]) -> Vec<u128> {
+    let mut words: Vec<u128> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| position_key(p) << 32 | i as u128)
+        .collect();
+    words.sort_unstable();
+    words
+}
+
+/// The 96-bit sort key of a position in [`sorted_vertex_words`].
+fn position_key(p: &[f32; 3]) -> u128 {
+    let key = |v: f32| {
+        let b = (if v == 0.0 { 0.0 } else { v }).to_bits();
+        u128::from(b ^ (((b as i32 >> 31) as u32) | 0x8000_0000))
+    };
+    key(p[0]) << 64 | key(p[1]) << 32 | key(p[2])
+}
+
+/// Whether the peer did the weld's work: `welded` (a weld's positions, in
+/// its order) is a subsequence of the distinct keys of `sorted` (the
+/// weld drops positions no kept triangle uses). Checked where the stages
+/// bench prepares each mesh.
+pub fn welded_in_sorted_words(sorted: &[u128], welded: &[[f32; 3]]) -> bool {
+    let mut next = welded.iter().map(position_key).peekable();
+    let mut last = None;
+    for key in sorted.iter().map(|w| w >> 32) {
+        if last == Some(key) {
+            continue;
+        }
+        last = Some(key);
+        if next.peek() == Some(&key) {
+            next.next();
+        }
+    }
+    next.next().is_none()
 }
