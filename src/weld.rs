@@ -521,18 +521,18 @@ pub fn weld_without_sources_timed(positions: &[[f32; 3]], indices: &[u32]) -> (W
     (welded, times)
 }
 
-/// Wall time of each step of [`weld`], in ms (see `weld_in`'s steps).
-#[derive(Debug, Clone, Copy, Default)]
+/// Wall time of each step of [`weld`] (see `weld_in`'s steps).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StepTimes {
     /// Step 1, sorting the vertices' words (`sort_vertices`).
-    pub sort: f64,
+    pub sort: std::time::Duration,
     /// Step 2, numbering the runs of equal positions.
-    pub numbering: f64,
+    pub numbering: std::time::Duration,
     /// Step 3, the triangles in run ids, the dropped ones closed up (and
     /// the sources, when asked for).
-    pub triangles: f64,
+    pub triangles: std::time::Duration,
     /// Step 4, dropping the runs no kept triangle uses.
-    pub unused: f64,
+    pub unused: std::time::Duration,
 }
 
 /// [`weld`], with [`Welded::source_triangle`] only when `sources`.
@@ -550,7 +550,6 @@ fn weld_in_timed(
     use rayon::prelude::*;
     use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
     use std::time::Instant;
-    let ms = |since: Instant| since.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let n = positions.len();
     let triangle_count = indices.len() / 3;
@@ -588,7 +587,7 @@ fn weld_in_timed(
 
     // 1. Sort all input vertices by position.
     let groups = sort_vertices(positions, words);
-    times.sort = ms(started);
+    times.sort = started.elapsed();
     let step = Instant::now();
 
     // 2. Number the runs of equal positions: `run[i]` is input vertex i's
@@ -653,7 +652,7 @@ fn weld_in_timed(
         run.set_len(n);
     }
     debug_assert!(run.iter().all(|r| r.load(Relaxed) != UNWRITTEN));
-    times.numbering = ms(step);
+    times.numbering = step.elapsed();
     let step = Instant::now();
 
     // 3. Triangles in run ids, in place, in fixed blocks in parallel; the
@@ -712,7 +711,7 @@ fn weld_in_timed(
         source
     };
 
-    times.triangles = ms(step);
+    times.triangles = step.elapsed();
     let step = Instant::now();
 
     // 4. Drop unused runs (those no kept triangle references) and renumber
@@ -742,7 +741,7 @@ fn weld_in_timed(
                 .for_each(|v| *v = rank[*v as usize]);
         }
     }
-    times.unused = ms(step);
+    times.unused = step.elapsed();
 
     Welded {
         positions: out_positions,
