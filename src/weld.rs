@@ -297,7 +297,17 @@ fn distinct_keys(sorted: &[u128]) -> usize {
 const VERTEX_BLOCK: usize = 1 << 16;
 
 /// Most buckets of [`sort_vertices`]; bucket numbers are kept as `u16`.
-const MAX_BUCKETS: usize = 1 << 12;
+///
+/// Why not more: the scatter writes into every bucket at once, and with
+/// 4,096 buckets their next slots (a cache line each, 256 KB) no longer
+/// stay in L1. The 5M-triangle scene's 2.57M vertices, one thread: the
+/// sort 59.2–67.3 ms (median 63.8) with at most 4,096 buckets, 55.6–60.1
+/// (median 59.1) with at most 1,024, seven alternations of `RECYCLE=1
+/// cargo run --release --example stage_probe -- weld`; 512: 58.0–58.8,
+/// two runs; the dragon (which took 4,096 and now takes 1,024) 9.9–11.0
+/// against 9.8–10.7 ms; two threads, whose scatter parts each write half
+/// the buckets, unchanged.
+const MAX_BUCKETS: usize = 1 << 10;
 
 /// Writes the words ([`vertex_word`]) of all `positions` into `words` (as
 /// long), sorted by key, and returns the sorted words in consecutive groups
@@ -310,8 +320,8 @@ const MAX_BUCKETS: usize = 1 << 12;
 /// Stanford dragon (x within ±0.11) an 11-bit one left all but 110 of its
 /// 2048 buckets empty. The bucket is a non-decreasing function of the key,
 /// so sorting within buckets sorts the whole. Each word is written once,
-/// straight into its bucket, and each bucket (about a hundred words) is then
-/// sorted in cache.
+/// straight into its bucket, and each bucket (a hundred to a few thousand
+/// words: at most [`MAX_BUCKETS`] of them) is then sorted in cache.
 fn sort_vertices<'w>(
     positions: &[[f32; 3]],
     words: &'w mut [MaybeUninit<u128>],
