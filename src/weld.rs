@@ -331,13 +331,22 @@ fn sort_vertices<'w>(
     debug_assert_eq!(words.len(), n);
     // Keys of the smallest and largest finite x; unreferenced vertices may
     // hold anything, and non-finite x go to the first or last bucket.
+    // A non-finite x folds in the neutral keys instead of being filtered
+    // out, so the fold vectorises: the 5M scene's sort 59.4–59.9 →
+    // 54.5–55.6 ms, the dragon's 10.4–11.4 → 10.1–11.2 ms (one thread,
+    // `RECYCLE=1 cargo run --release --example stage_probe -- weld`, three
+    // alternations).
     let (kmin, kmax) = positions
         .par_chunks(VERTEX_BLOCK)
         .map(|c| {
-            c.iter()
-                .filter(|p| p[0].is_finite())
-                .map(|p| order_key(canonical(p[0])))
-                .fold((u32::MAX, 0), |(lo, hi), k| (lo.min(k), hi.max(k)))
+            c.iter().fold((u32::MAX, 0), |(lo, hi), p| {
+                let k = order_key(canonical(p[0]));
+                let finite = p[0].is_finite();
+                (
+                    lo.min(if finite { k } else { u32::MAX }),
+                    hi.max(if finite { k } else { 0 }),
+                )
+            })
         })
         .reduce(|| (u32::MAX, 0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
     let buckets = if kmin < kmax {
