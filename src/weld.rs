@@ -372,7 +372,8 @@ fn sort_vertices<'w>(
         } else {
             t
         };
-        // SAFETY: not NaN, and clamped into 0..=top, below 2^16.
+        // SAFETY: not NaN, and clamped into 0..=top (at most
+        // `MAX_BUCKETS - 1`), so finite and in range for u32 and u16.
         unsafe { t.clamp(0.0, top).to_int_unchecked::<u32>() as usize }
     };
 
@@ -560,7 +561,8 @@ pub fn weld_without_sources_timed(positions: &[[f32; 3]], indices: &[u32]) -> (W
 /// Wall time of each step of [`weld`] (see `weld_in`'s steps).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StepTimes {
-    /// Step 1, sorting the vertices' words (`sort_vertices`).
+    /// Step 1, sorting the vertices' words (`sort_vertices`), with the
+    /// output buffers' allocation before it.
     pub sort: std::time::Duration,
     /// Step 2, numbering the runs of equal positions.
     pub numbering: std::time::Duration,
