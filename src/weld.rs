@@ -765,8 +765,15 @@ fn weld_in_timed(
 
     // 4. Drop unused runs (those no kept triangle references) and renumber
     //    densely; the order stays lexicographic. Usually every vertex is
-    //    marked, which one scan shows.
-    if !run.par_iter().all(|r| r.load(Relaxed) & USED != 0) {
+    //    marked, which one scan shows: an and of every entry per block,
+    //    through `get_mut` (plain loads, which vectorise; atomic loads do
+    //    not): the 5M scene's 2.5–2.6 → 0.9–1.0 ms, the dragon's 0.27–0.30
+    //    → 0.12–0.13 ms (one thread, `RECYCLE=1 cargo run --release
+    //    --example stage_probe -- weld`, three alternations).
+    if !run
+        .par_chunks_mut(VERTEX_BLOCK)
+        .all(|c| c.iter_mut().fold(USED, |all, r| all & *r.get_mut()) != 0)
+    {
         let mut used = vec![false; runs];
         for r in &run {
             let r = r.load(Relaxed);
