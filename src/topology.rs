@@ -656,9 +656,12 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
         // passes`, three alternations with a local edit.)
         let s = head[rl] as usize;
         head[rl] += 1;
+        // Each range is a stream of stores of its own: see `LIST_AHEAD`.
+        crate::hint::prefetch_ptr(out.wrapping_add(s + LIST_AHEAD));
         put(s, E::new(lo, mid, hi, bits), id);
         let s = head[rm] as usize;
         head[rm] += 1;
+        crate::hint::prefetch_ptr(out.wrapping_add(s + LIST_AHEAD));
         put(s, E::new(mid, hi, lo, bits), id);
     }
 }
@@ -707,7 +710,7 @@ impl Scratch {
 /// counters (32 KB, and as many to fill from) and its output (256 KB for
 /// the dragon's average range) stay in L2.
 ///
-/// With `ahead`, range `r + 1`'s counts are taken in the same loop as
+/// With `count_next`, range `r + 1`'s counts are taken in the same loop as
 /// this range's scatter, for the next call (`scratch.counted`): two
 /// independent streams of work in one loop, where the scatter alone waits
 /// on its stores. The emit pass 10.6–11.5 → 10.0–10.6 ms on the dragon
@@ -718,7 +721,7 @@ impl Scratch {
 fn sort_range<E: Entry, const TRI: bool>(
     buckets: &Buckets,
     r: usize,
-    ahead: bool,
+    count_next: bool,
     scratch: &mut Scratch,
 ) {
     let span = |r: usize| {
@@ -734,12 +737,23 @@ fn sort_range<E: Entry, const TRI: bool>(
     // ids), and no record has been written over them yet (the caller's
     // order).
     let entry = |j: usize| unsafe { at.wrapping_add(j).read_unaligned() };
+    // The first read of a range's listings (its count) comes from L3 or
+    // memory, the second (the scatter) from L2: the count asks for the
+    // line `LISTING_AHEAD` bytes on, once per line's worth of entries.
+    let per_line = (64 / std::mem::size_of::<E>()).max(1);
+    let ahead = LISTING_AHEAD / std::mem::size_of::<E>();
+    let count_hint = |j: usize| {
+        if j.is_multiple_of(per_line) {
+            crate::hint::prefetch_ptr(at.wrapping_add(j + ahead));
+        }
+    };
     let ids = buckets.tri as *const u32;
     if scratch.counted == Some(r) {
         std::mem::swap(&mut scratch.start, &mut scratch.next);
     } else {
         scratch.start.fill(0);
         for j in from..from + len {
+            count_hint(j);
             scratch.start[entry(j).place() + 1] += 1;
         }
     }
@@ -770,19 +784,21 @@ fn sort_range<E: Entry, const TRI: bool>(
             tri[s] = id;
         }
     };
-    if ahead {
+    if count_next {
         let (from2, len2) = span(r + 1);
         let next = &mut *scratch.next;
         next.fill(0);
         let both = len.min(len2);
         for j in 0..both {
             put(j);
+            count_hint(from2 + j);
             next[entry(from2 + j).place() + 1] += 1;
         }
         for j in both..len {
             put(j);
         }
         for j in from2 + both..from2 + len2 {
+            count_hint(j);
             next[entry(j).place() + 1] += 1;
         }
         scratch.counted = Some(r + 1);
@@ -1506,6 +1522,31 @@ const NETWORK8: [&[(usize, usize)]; 6] = [
 const RANGE_SHIFT: u32 = 13;
 /// Vertices per range.
 const RANGE: usize = 1 << RANGE_SHIFT;
+/// How far ahead, in bytes, [`sort_range`]'s counts ask for a range's
+/// listings (a prefetch once per cache line's worth of entries). The
+/// listings were written by pass 2 long before, so the counts read them
+/// from L3 or memory, and the hardware's prefetch of that stream, beside
+/// the scatter's stores and the next range's counts, left the loop
+/// waiting on its loads (`perf annotate`: a quarter of `emit_ranges`'
+/// samples on the two instructions after them). One thread, `RECYCLE=1
+/// cargo run --release --example stage_probe -- passes`, the emit pass's
+/// median of six alternations: the 5M scene 66.0 → 62.0 ms, the dragon
+/// 11.16 → 10.64 ms (of four, with the final binaries: 69.3 → 66.9 ms
+/// and 11.12 → 11.13 ms); 1 KiB ahead gained less, 4 KiB about the same.
+const LISTING_AHEAD: usize = 2048;
+/// How many listings ahead of a range's next slot pass 2 asks for that
+/// line (with every listing; 16 listings, two or three cache lines). The
+/// pass appends to every range at once, 53 streams on the dragon and 314
+/// on the 5M scene, more than the hardware's prefetchers follow, so its
+/// stores waited for their lines. A read prefetch is enough: the line
+/// comes in exclusive when no other core holds it, and the store finds it
+/// so (`_MM_HINT_ET0` compiles to the same `prefetcht0` without the
+/// `prfchw` target feature). One thread, `RECYCLE=1 cargo run --release
+/// --example stage_probe -- passes`, the list pass's median of four
+/// alternations: the 5M scene 36.2 → 33.6 ms (8 or 32 listings ahead:
+/// 33.7, 34.1; with the final binaries 34.8 → 32.7 ms), the dragon,
+/// whose 53 streams the caches mostly hold, 6.25 → 6.16 ms (noise).
+const LIST_AHEAD: usize = 16;
 /// Below this many triangles the count and list passes run as one chunk:
 /// a chunk costs a count array over all vertices.
 const PARALLEL_MIN: usize = 1 << 16;
