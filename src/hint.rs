@@ -39,3 +39,33 @@ pub(crate) fn prefetch_ptr<T>(p: *const T) {
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
 }
+
+/// How far ahead, in bytes, [`prefetch_stream`] asks for a stream that a
+/// loop reads in order: 2 KiB, 32 cache lines.
+///
+/// Why at all, when the hardware prefetches sequential reads: on this
+/// project's machine (a virtual machine on a Xeon) it did not run far
+/// enough ahead of loops that do little work per byte read, which waited
+/// on their loads (`perf annotate`: most samples of the topology's count
+/// and list passes on the instructions after the triangle loads). One
+/// thread, `RECYCLE=1 cargo run --release --example stage_probe --
+/// passes` (or `-- weld`), medians of four alternations, the dragon / the
+/// 5M scene:
+///
+/// - the topology's count pass 2.48 → 1.82 / 15.7 → 10.7 ms, its list
+///   pass 5.83 → 3.74 / 31.4 → 24.4 ms (the triangles);
+/// - the weld's triangle step 3.82 → 3.33 / 19.1 → 16.8 ms (the input
+///   indices), its sort 9.33 → 9.01 / 56.6 → 53.5 ms (the positions its
+///   scatter reads);
+/// - the topology's emit pass, whose range counts read the listings
+///   (once per line): 11.16 → 10.64 / 66.0 → 62.0 ms (six alternations;
+///   1 KiB ahead gained less, 4 KiB about the same).
+pub(crate) const STREAM_AHEAD: usize = 2048;
+
+/// [`prefetch_ptr`] of the byte [`STREAM_AHEAD`] past `p`, the element a
+/// loop reading in order is at: call it with every element (a prefetch of
+/// a line already asked for costs one instruction) or once per line.
+#[inline(always)]
+pub(crate) fn prefetch_stream<T>(p: *const T) {
+    prefetch_ptr((p as *const u8).wrapping_add(STREAM_AHEAD))
+}

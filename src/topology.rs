@@ -275,6 +275,7 @@ fn build_edges_in<const TRI: bool>(
             let mut lanes = vec![0u64; 4 * ranges];
             let mut odd = 0u64;
             for (i, t) in tris.chunks_exact(3).enumerate() {
+                crate::hint::prefetch_stream(tris.as_ptr().wrapping_add(3 * i));
                 let (lo, mid, hi) = sort3(t);
                 if parity {
                     let key = |a: u32, b: u32| {
@@ -647,6 +648,7 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
     };
     for (i, t) in tris.chunks_exact(3).enumerate() {
         let id = first_id + i as u32;
+        crate::hint::prefetch_stream(tris.as_ptr().wrapping_add(3 * i));
         let (lo, mid, hi) = sort3(t);
         let (rl, rm) = ((lo >> RANGE_SHIFT) as usize, (mid >> RANGE_SHIFT) as usize);
         // (One update of the head for both listings where they fall in one
@@ -739,12 +741,12 @@ fn sort_range<E: Entry, const TRI: bool>(
     let entry = |j: usize| unsafe { at.wrapping_add(j).read_unaligned() };
     // The first read of a range's listings (its count) comes from L3 or
     // memory, the second (the scatter) from L2: the count asks for the
-    // line `LISTING_AHEAD` bytes on, once per line's worth of entries.
+    // stream ahead (`hint::STREAM_AHEAD`), once per line's worth of
+    // entries.
     let per_line = (64 / std::mem::size_of::<E>()).max(1);
-    let ahead = LISTING_AHEAD / std::mem::size_of::<E>();
     let count_hint = |j: usize| {
         if j.is_multiple_of(per_line) {
-            crate::hint::prefetch_ptr(at.wrapping_add(j + ahead));
+            crate::hint::prefetch_stream(at.wrapping_add(j));
         }
     };
     let ids = buckets.tri as *const u32;
@@ -1522,18 +1524,6 @@ const NETWORK8: [&[(usize, usize)]; 6] = [
 const RANGE_SHIFT: u32 = 13;
 /// Vertices per range.
 const RANGE: usize = 1 << RANGE_SHIFT;
-/// How far ahead, in bytes, [`sort_range`]'s counts ask for a range's
-/// listings (a prefetch once per cache line's worth of entries). The
-/// listings were written by pass 2 long before, so the counts read them
-/// from L3 or memory, and the hardware's prefetch of that stream, beside
-/// the scatter's stores and the next range's counts, left the loop
-/// waiting on its loads (`perf annotate`: a quarter of `emit_ranges`'
-/// samples on the two instructions after them). One thread, `RECYCLE=1
-/// cargo run --release --example stage_probe -- passes`, the emit pass's
-/// median of six alternations: the 5M scene 66.0 → 62.0 ms, the dragon
-/// 11.16 → 10.64 ms (of four, with the final binaries: 69.3 → 66.9 ms
-/// and 11.12 → 11.13 ms); 1 KiB ahead gained less, 4 KiB about the same.
-const LISTING_AHEAD: usize = 2048;
 /// How many listings ahead of a range's next slot pass 2 asks for that
 /// line (with every listing; 16 listings, two or three cache lines). The
 /// pass appends to every range at once, 53 streams on the dragon and 314

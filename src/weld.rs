@@ -454,6 +454,7 @@ fn sort_vertices<'w>(
             sum += size;
         }
         for (i, (&p, &b)) in positions.iter().zip(&ids).enumerate() {
+            crate::hint::prefetch_stream(positions.as_ptr().wrapping_add(i));
             // Out-of-part buckets wrap around to past the end.
             if let Some(c) = next.get_mut((b as usize).wrapping_sub(first)) {
                 // The bucket's line four lines on: see `SCATTER_AHEAD`.
@@ -734,6 +735,7 @@ fn weld_in_timed(
                 .zip(out.chunks_exact_mut(3))
                 .enumerate()
             {
+                crate::hint::prefetch_stream(block.as_ptr().wrapping_add(3 * i));
                 let r = [
                     run[c[0] as usize].load(Relaxed),
                     run[c[1] as usize].load(Relaxed),
