@@ -1534,8 +1534,9 @@ const RANGE: usize = 1 << RANGE_SHIFT;
 /// `prfchw` target feature). One thread, `RECYCLE=1 cargo run --release
 /// --example stage_probe -- passes`, the list pass's median of four
 /// alternations: the 5M scene 36.2 → 33.6 ms (8 or 32 listings ahead:
-/// 33.7, 34.1; with the final binaries 34.8 → 32.7 ms), the dragon,
-/// whose 53 streams the caches mostly hold, 6.25 → 6.16 ms (noise).
+/// 33.7, 34.1; in a second run, c423f54 against its parent, 34.8 → 32.7
+/// ms), the dragon, whose 53 streams the caches mostly hold, 6.25 → 6.16
+/// ms (noise).
 const LIST_AHEAD: usize = 16;
 /// Below this many triangles the count and list passes run as one chunk:
 /// a chunk costs a count array over all vertices.

@@ -314,11 +314,12 @@ const MAX_BUCKETS: usize = 1 << 10;
 /// for the topology's listings, `topology::LIST_AHEAD`). Each bucket is a
 /// stream of its own, up to [`MAX_BUCKETS`] of them, more than the
 /// hardware's prefetchers follow, so without the hint every fourth store
-/// to a bucket waited for its line. One thread, `RECYCLE=1 cargo run --release --example
-/// stage_probe -- weld`, the sort step's median of four alternations: the
-/// 5M scene 58.0 → 54.6 ms (8 words ahead: 56.1; with the final binaries
-/// 58.9 → 55.0 ms), the dragon, whose 7 MB of words L3 holds, 9.19 →
-/// 9.02 ms (9.51 → 9.49 ms: noise).
+/// to a bucket waited for its line. One thread, `RECYCLE=1 cargo run
+/// --release --example stage_probe -- weld`, the sort step's median of
+/// four alternations: the 5M scene 58.0 → 54.6 ms (8 words ahead: 56.1;
+/// in a second run, c423f54 against its parent, 58.9 → 55.0 ms), the
+/// dragon, whose 7 MB of words L3 holds, 9.19 → 9.02 ms (9.51 → 9.49 ms:
+/// noise).
 const SCATTER_AHEAD: usize = 16;
 
 /// Writes the words ([`vertex_word`]) of all `positions` into `words` (as
