@@ -368,6 +368,7 @@ fn build_edges_in<const TRI: bool>(
         at: list_at,
         tri: list_t_at,
         bits,
+        narrow: Buckets::narrow_for(vertex_count),
     };
     let listed = Instant::now();
     // Pass 3: the edges with their opposite vertices and triangles, one
@@ -557,6 +558,13 @@ fn build_edges_in<const TRI: bool>(
     (e, times)
 }
 
+/// The AVX-512 emit ([`emit_range_avx512`]) sorts keys `larger << 4 |
+/// rank` of 32 bits, with all ones past the last record: for the records'
+/// keys to fit, and their larger endpoints to differ from that padding's,
+/// vertex ids must be below `KEY_IDS − 1`, so the vertex count below
+/// `KEY_IDS`. Larger meshes take the scalar emit ([`emit_vertex`]).
+const KEY_IDS: usize = 1 << 28;
+
 /// Bits per vertex id in a packed listing (`u64` [`Entry`]): two ids and
 /// the listed vertex's place in its range must fit in 64 bits. None when
 /// the ids need more (over 2^25 vertices): the listings are then 12 bytes.
@@ -678,6 +686,15 @@ struct Buckets<'a> {
     tri: usize,
     /// Bits per id of the packed `u64` entries, or None for `[u32; 3]`.
     bits: Option<u32>,
+    /// Every vertex id is below [`KEY_IDS`] − 1.
+    narrow: bool,
+}
+
+impl Buckets<'_> {
+    /// [`Buckets::narrow`] for `vertex_count` vertices.
+    fn narrow_for(vertex_count: usize) -> bool {
+        vertex_count < KEY_IDS
+    }
 }
 
 /// A pass 3 job's buffers: a range's listings in vertex order, their
@@ -1057,6 +1074,9 @@ struct Listings<'a> {
     pairs: &'a [[u32; 2]],
     /// Each listing's triangle (empty without `opp_tri`).
     tri: &'a [u32],
+    /// Every vertex id is below [`KEY_IDS`] − 1, so the AVX-512 kernel may
+    /// sort keys of 32 bits (an id and a rank of 4 bits).
+    narrow: bool,
 }
 
 impl Listings<'_> {
@@ -1118,6 +1138,7 @@ fn emit_ranges<const TRI: bool>(
             first: v,
             pairs: &scratch.pairs,
             tri: &scratch.tri,
+            narrow: buckets.narrow,
         };
         let (rn, en) = emit_group::<TRI>(o, &listings, v..next, &mut scratch.records, simd);
         records += rn;
@@ -1139,7 +1160,7 @@ fn emit_group<const TRI: bool>(
     simd: bool,
 ) -> (usize, usize) {
     #[cfg(target_arch = "x86_64")]
-    if !TRI && simd {
+    if !TRI && simd && listings.narrow {
         // SAFETY: `simd` is set only where the CPU has AVX-512F and
         // AVX-512VL (`simd_available`).
         return unsafe { emit_range_avx512(out, listings, vertices, buf) };
@@ -1266,22 +1287,38 @@ fn emit_vertex<const TRI: bool>(
 
 /// [`emit_vertex`] for a group's `vertices`: vertices with at most 8
 /// listings in AVX-512 registers (all but 84 of the dragon's 435,545), the
-/// others by [`emit_vertex`]. Same output, word for word.
+/// others by [`emit_vertex`]. Same output, word for word. Only for
+/// `listings.narrow` (ids below [`KEY_IDS`] − 1).
 ///
 /// Method, per vertex: its listings in one load; the larger endpoints are
 /// the listings' words as they lie ([p, q] gives p, and q where p < q), the
 /// opposite vertices the same words with each pair swapped; one compress of
 /// each by the mask of records keeps them in listing (so triangle) order.
-/// Keys `larger << 32 | rank` go through the same 8-input sorting network
-/// as [`sort_small`] (a permute, a min, a max and a blend per layer), or
-/// with 9 to 16 records (5.7% of the dragon's vertices, 10% of its
-/// records) through it in two registers and a bitonic merge: distinct
-/// keys, so the result is the stable order. The ranks then permute the
-/// opposite vertices; an edge ends where the next larger endpoint differs,
-/// and the edges are compressed out of the records. Why: the scalar
-/// version spends its time moving records through memory, on the
-/// network's 19 dependent compare-exchanges, and above 8 records on the
-/// standard sort's mispredicted branches.
+/// Keys `larger << 4 | rank` of 32 bits go through the same 8-input
+/// sorting network as [`sort_small`] (a permute, a min, a max and a blend
+/// per layer) in a 256-bit register, or with 9 to 16 records (5.7% of the
+/// dragon's vertices, 10% of its records) through it in two registers and
+/// a bitonic merge: distinct keys, so the result is the stable order. The
+/// ranks then permute the opposite vertices; an edge ends where the next
+/// larger endpoint differs, and the edges are compressed out of the
+/// records. Why: the scalar version spends its time moving records
+/// through memory, on the network's 19 dependent compare-exchanges, and
+/// above 8 records on the standard sort's mispredicted branches.
+///
+/// Why 32-bit keys in 256-bit registers (until the twenty-fifth round the
+/// keys were `larger << 32 | rank`, 8 to a 512-bit register): this
+/// machine's AMD EPYC runs a 512-bit operation as two 256-bit halves, and
+/// the keys took conversions to and from 64 bits. One thread, `RECYCLE=1
+/// cargo run --release --example stage_probe -- passes`, the emit pass's
+/// median of alternated runs against the 64-bit keys: the dragon 11.0 →
+/// 8.5 ms (six), the 5M scene 62.6 → 50.5 ms (four). The records of a
+/// vertex with 9 to 16 go out as two halves of 8, each through the same
+/// 256-bit code. A version that finished every vertex's records in one
+/// 512-bit register was slower than one with the 256-bit code for up to 8
+/// records (and the 64-bit keys above): the emit's medians 8.84 against
+/// 8.65 ms on the dragon (five alternations), 57.6 against 51.8 ms on the
+/// 5M scene (three). Over 2^28 vertices, where the keys would not fit,
+/// the scalar emit runs ([`KEY_IDS`]).
 ///
 /// # Safety
 /// The CPU must have AVX-512F and AVX-512VL.
@@ -1294,23 +1331,27 @@ unsafe fn emit_range_avx512(
     buf: &mut Vec<[u32; 4]>,
 ) -> (usize, usize) {
     use std::arch::x86_64::*;
+    debug_assert!(
+        listings.narrow,
+        "topology: 32-bit keys need ids below KEY_IDS - 1"
+    );
     // The network's layers: each lane's partner, and the lanes that take
     // the larger key.
-    const LAYERS: [([i64; 8], u8); 6] = {
+    const LAYERS: [([i32; 8], u8); 6] = {
         const PAIRS: [&[(usize, usize)]; 6] = NETWORK8;
-        let mut layers = [([0i64; 8], 0u8); 6];
+        let mut layers = [([0i32; 8], 0u8); 6];
         let mut l = 0;
         while l < 6 {
             let mut i = 0;
             while i < 8 {
-                layers[l].0[i] = i as i64;
+                layers[l].0[i] = i as i32;
                 i += 1;
             }
             let mut p = 0;
             while p < PAIRS[l].len() {
                 let (lo, hi) = PAIRS[l][p];
-                layers[l].0[lo] = hi as i64;
-                layers[l].0[hi] = lo as i64;
+                layers[l].0[lo] = hi as i32;
+                layers[l].0[hi] = lo as i32;
                 layers[l].1 |= 1 << hi;
                 p += 1;
             }
@@ -1318,19 +1359,19 @@ unsafe fn emit_range_avx512(
         }
         layers
     };
-    // SAFETY: each row is 8 i64.
-    let partners = LAYERS.map(|(p, upper)| (unsafe { _mm512_loadu_epi64(p.as_ptr()) }, upper));
-    let rank64 = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
-    let rank32 = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
-    let reverse = _mm512_set_epi64(0, 1, 2, 3, 4, 5, 6, 7);
-    let none = _mm512_set1_epi64(-1);
+    // SAFETY: each row is 8 i32.
+    let partners =
+        LAYERS.map(|(p, upper)| (unsafe { _mm256_loadu_si256(p.as_ptr().cast()) }, upper));
+    let rank = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+    let reverse = _mm256_set_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let none = _mm512_set1_epi32(-1);
     // One layer of compare-exchanges: lane i against lane `partner[i]`,
     // the lanes in `upper` keeping the larger key.
-    let layer = |s: __m512i, partner: __m512i, upper: u8| {
-        let p = _mm512_permutexvar_epi64(partner, s);
-        _mm512_mask_blend_epi64(upper, _mm512_min_epu64(s, p), _mm512_max_epu64(s, p))
+    let layer = |s: __m256i, partner: __m256i, upper: u8| {
+        let p = _mm256_permutexvar_epi32(partner, s);
+        _mm256_mask_blend_epi32(upper, _mm256_min_epu32(s, p), _mm256_max_epu32(s, p))
     };
-    let sort8 = |mut s: __m512i| {
+    let sort8 = |mut s: __m256i| {
         for &(partner, upper) in &partners {
             s = layer(s, partner, upper);
         }
@@ -1338,15 +1379,92 @@ unsafe fn emit_range_avx512(
     };
     // Half-cleaners at distances 4, 2 and 1: sorts a bitonic sequence.
     let cleaners = [
-        (_mm512_set_epi64(3, 2, 1, 0, 7, 6, 5, 4), 0xF0u8),
-        (_mm512_set_epi64(5, 4, 7, 6, 1, 0, 3, 2), 0xCC),
-        (_mm512_set_epi64(6, 7, 4, 5, 2, 3, 0, 1), 0xAA),
+        (_mm256_set_epi32(3, 2, 1, 0, 7, 6, 5, 4), 0xF0u8),
+        (_mm256_set_epi32(5, 4, 7, 6, 1, 0, 3, 2), 0xCC),
+        (_mm256_set_epi32(6, 7, 4, 5, 2, 3, 0, 1), 0xAA),
     ];
-    let merge8 = |mut s: __m512i| {
+    let merge8 = |mut s: __m256i| {
         for &(partner, upper) in &cleaners {
             s = layer(s, partner, upper);
         }
         s
+    };
+    let rank8 = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0);
+    let none8 = _mm256_set1_epi32(-1);
+    // Writes `k` (at most 8) sorted records of vertex `v` and their edges:
+    // `sorted` their keys, `after` keys whose first is the key after them
+    // (all ones for none), `opp_lo` and `opp_hi` the vertex's opposite
+    // vertices by rank.
+    let finish = |out: &mut GroupOut,
+                  sorted: __m256i,
+                  after: __m256i,
+                  opp_lo: __m256i,
+                  opp_hi: __m256i,
+                  k: usize,
+                  v: usize| {
+        let kmask = ((1u32 << k) - 1) as u8;
+        let larger = _mm256_srli_epi32::<4>(sorted);
+        let opposite = _mm256_permutex2var_epi32(
+            opp_lo,
+            _mm256_and_si256(sorted, _mm256_set1_epi32(15)),
+            opp_hi,
+        );
+        let next = _mm256_srli_epi32::<4>(_mm256_alignr_epi32::<1>(after, sorted));
+        let ends = _mm256_mask_cmpneq_epu32_mask(kmask, larger, next);
+        let edges = ends.count_ones() as usize;
+        let emask = ((1u32 << edges) - 1) as u8;
+        let end = _mm256_add_epi32(
+            rank8,
+            _mm256_set1_epi32((out.base + out.records as u32 + 1) as i32),
+        );
+        let (a_at, b_at, end_at) = (
+            _mm256_set1_epi32(v as i32),
+            _mm256_maskz_compress_epi32(ends, larger),
+            _mm256_maskz_compress_epi32(ends, end),
+        );
+        // SAFETY: records `records..records + k` are the group's
+        // (asserted by the caller), and edges never outnumber records; the
+        // whole stores write 8 slots from `edges` only inside `a`, `b` and
+        // `end`, which are equally long.
+        unsafe {
+            _mm256_mask_storeu_epi32(out.opp.add(out.records).cast(), kmask, opposite);
+            let (a, b, e) = (
+                out.a.as_mut_ptr().add(out.edges),
+                out.b.as_mut_ptr().add(out.edges),
+                out.end.as_mut_ptr().add(out.edges),
+            );
+            // Whole stores of the edges, with garbage past the vertex's
+            // last edge, which the next vertex's edges overwrite (or which
+            // lies past the edges the group returns), except near the
+            // arrays' ends. Why: a masked store is slow on this machine's
+            // AMD EPYC: the emit pass's median of five alternations went
+            // 13.8 → 11.5 ms on the dragon, 78.7 → 66.5 ms on the 5M scene
+            // (three), one thread (`RECYCLE=1 cargo run --release --example
+            // stage_probe -- passes`). The same for the records, which
+            // would need the room past them tracked, gained nothing (11.9 /
+            // 11.9 ms on the dragon, 71 / 66 ms on the 5M scene).
+            if out.edges + 8 <= out.a.len() {
+                _mm256_storeu_si256(a.cast(), a_at);
+                _mm256_storeu_si256(b.cast(), b_at);
+                _mm256_storeu_si256(e.cast(), end_at);
+            } else {
+                _mm256_mask_storeu_epi32(a.cast(), emask, a_at);
+                _mm256_mask_storeu_epi32(b.cast(), emask, b_at);
+                _mm256_mask_storeu_epi32(e.cast(), emask, end_at);
+            }
+            // The three edge arrays 2 KiB ahead (`hint::STREAM_AHEAD`).
+            // One thread, `RECYCLE=1 cargo run --release --example
+            // stage_probe -- passes`, the emit pass's median of eight
+            // alternations: the dragon 10.44 → 10.16 ms, the 5M scene 62.7
+            // → 59.3 ms. In `emit_vertex` (`NO_AVX512=1`, four
+            // alternations) it gained nothing: 19.23 → 19.20 and 90.9 →
+            // 96.6 ms.
+            crate::hint::prefetch_stream(a);
+            crate::hint::prefetch_stream(b);
+            crate::hint::prefetch_stream(e);
+        }
+        out.records += k;
+        out.edges += edges;
     };
     for v in vertices {
         let (from, to) = listings.of(v);
@@ -1379,104 +1497,39 @@ unsafe fn emit_range_avx512(
                 out.records + k <= out.a.len(),
                 "topology: records miscounted"
             );
-            let larger = _mm512_maskz_compress_epi32(records, x);
-            let opposite = _mm512_maskz_compress_epi32(records, swapped);
             let kmask = ((1u32 << k) - 1) as u16;
-            // Keys of 8 records (a half of `larger`) ranked from `ranks`,
-            // all ones past the last record.
-            let keys = |half: __m256i, ranks: __m512i, valid: u8| {
-                let wide = _mm512_slli_epi64::<32>(_mm512_cvtepu32_epi64(half));
-                _mm512_mask_blend_epi64(valid, none, _mm512_or_si512(wide, ranks))
-            };
-            let first = keys(_mm512_castsi512_si256(larger), rank64, kmask as u8);
-            let (lo, hi) = if k <= 8 {
-                (sort8(first), none)
+            // Keys `larger << 4 | rank`, all ones past the last record
+            // (whose larger endpoint no record has: `narrow`).
+            let keys = _mm512_mask_blend_epi32(
+                kmask,
+                none,
+                _mm512_or_si512(
+                    _mm512_slli_epi32::<4>(_mm512_maskz_compress_epi32(records, x)),
+                    rank,
+                ),
+            );
+            let opposite = _mm512_maskz_compress_epi32(records, swapped);
+            let (opp_lo, opp_hi) = (
+                _mm512_castsi512_si256(opposite),
+                _mm512_extracti64x4_epi64::<1>(opposite),
+            );
+            let first = _mm512_castsi512_si256(keys);
+            if k <= 8 {
+                finish(&mut out, sort8(first), none8, opp_lo, opp_hi, k, v);
             } else {
-                let second = keys(
-                    _mm512_extracti64x4_epi64::<1>(larger),
-                    _mm512_add_epi64(rank64, _mm512_set1_epi64(8)),
-                    (kmask >> 8) as u8,
-                );
                 // Two sorted halves, then a bitonic merge: the first half
                 // against the second reversed gives the 8 smallest and the
                 // 8 largest keys, each a bitonic sequence, which three
                 // half-cleaners sort.
-                let (a, b) = (sort8(first), sort8(second));
-                let b = _mm512_permutexvar_epi64(reverse, b);
-                (
-                    merge8(_mm512_min_epu64(a, b)),
-                    merge8(_mm512_max_epu64(a, b)),
-                )
-            };
-            // The sorted keys as 16 larger endpoints and 16 ranks.
-            let join = |a: __m512i, b: __m512i| {
-                _mm512_inserti64x4::<1>(
-                    _mm512_castsi256_si512(_mm512_cvtepi64_epi32(a)),
-                    _mm512_cvtepi64_epi32(b),
-                )
-            };
-            let larger = join(_mm512_srli_epi64::<32>(lo), _mm512_srli_epi64::<32>(hi));
-            let rank = join(lo, hi);
-            let opposite = _mm512_permutexvar_epi32(rank, opposite);
-            // Past the last record the key is all ones, which no vertex id
-            // reaches.
-            let next = _mm512_alignr_epi32::<1>(none, larger);
-            let ends = _mm512_mask_cmpneq_epu32_mask(kmask, larger, next);
-            let edges = ends.count_ones() as usize;
-            let emask = ((1u32 << edges) - 1) as u16;
-            let end = _mm512_add_epi32(
-                rank32,
-                _mm512_set1_epi32((out.base + out.records as u32 + 1) as i32),
-            );
-            let (a_at, b_at, end_at) = (
-                _mm512_set1_epi32(v as i32),
-                _mm512_maskz_compress_epi32(ends, larger),
-                _mm512_maskz_compress_epi32(ends, end),
-            );
-            // SAFETY: records `records..records + k` are the group's
-            // (asserted above), and edges never outnumber records; the
-            // whole stores write 16 slots from `edges` only inside `a`, `b`
-            // and `end`, which are equally long.
-            unsafe {
-                _mm512_mask_storeu_epi32(out.opp.add(out.records).cast(), kmask, opposite);
-                let (a, b, e) = (
-                    out.a.as_mut_ptr().add(out.edges),
-                    out.b.as_mut_ptr().add(out.edges),
-                    out.end.as_mut_ptr().add(out.edges),
+                let (a, b) = (sort8(first), sort8(_mm512_extracti64x4_epi64::<1>(keys)));
+                let b = _mm256_permutexvar_epi32(reverse, b);
+                let (lo, hi) = (
+                    merge8(_mm256_min_epu32(a, b)),
+                    merge8(_mm256_max_epu32(a, b)),
                 );
-                // Whole stores of the edges, with garbage past the vertex's
-                // last edge, which the next vertex's edges overwrite (or
-                // which lies past the edges the group returns), except
-                // near the arrays' ends. Why: a masked store is slow on
-                // this machine's AMD EPYC: the emit pass's median of five
-                // alternations went 13.8 → 11.5 ms on the dragon, 78.7 →
-                // 66.5 ms on the 5M scene (three), one thread (`RECYCLE=1
-                // cargo run --release --example stage_probe -- passes`).
-                // The same for the records, which would need the room
-                // past them tracked, gained nothing (11.9 / 11.9 ms on the
-                // dragon, 71 / 66 ms on the 5M scene).
-                if out.edges + 16 <= out.a.len() {
-                    _mm512_storeu_si512(a.cast(), a_at);
-                    _mm512_storeu_si512(b.cast(), b_at);
-                    _mm512_storeu_si512(e.cast(), end_at);
-                } else {
-                    _mm512_mask_storeu_epi32(a.cast(), emask, a_at);
-                    _mm512_mask_storeu_epi32(b.cast(), emask, b_at);
-                    _mm512_mask_storeu_epi32(e.cast(), emask, end_at);
-                }
-                // The three edge arrays 2 KiB ahead (`hint::STREAM_AHEAD`).
-                // One thread, `RECYCLE=1 cargo run --release --example
-                // stage_probe -- passes`, the emit pass's median of eight
-                // alternations: the dragon 10.44 → 10.16 ms, the 5M scene
-                // 62.7 → 59.3 ms. In `emit_vertex` (`NO_AVX512=1`, four
-                // alternations) it gained nothing: 19.23 → 19.20 and 90.9
-                // → 96.6 ms.
-                crate::hint::prefetch_stream(a);
-                crate::hint::prefetch_stream(b);
-                crate::hint::prefetch_stream(e);
+                finish(&mut out, lo, hi, opp_lo, opp_hi, 8, v);
+                finish(&mut out, hi, none8, opp_lo, opp_hi, k - 8, v);
             }
-            out.records += k;
-            out.edges += edges;
             continue;
         }
         let listed = &listings.pairs[from..to];
@@ -1867,6 +1920,110 @@ mod tests {
             build_edges_in::<true>(&tris[..3], vertices, 4, false, false, None).0,
             naive(&tris[..3])
         );
+    }
+
+    /// Pass 3 on triangles over the given vertex ids alone, by the AVX-512
+    /// kernel when `simd`, else by the scalar emit: the opposite vertices
+    /// and the edges (a, b, end of its opposite vertices) it writes.
+    fn emit_alone(tris: &[u32], simd: bool) -> (Vec<u32>, Vec<[u32; 3]>) {
+        let ids = tris.iter().copied();
+        let (first, last) = (ids.clone().min().unwrap(), ids.max().unwrap());
+        let mut under = vec![Vec::new(); (last - first + 1) as usize];
+        for t in tris.chunks_exact(3) {
+            let (lo, mid, hi) = sort3(t);
+            under[(lo - first) as usize].push([mid, hi]);
+            under[(mid - first) as usize].push([hi, lo]);
+        }
+        let mut start = vec![0u32];
+        let mut pairs = Vec::new();
+        for l in &under {
+            pairs.extend_from_slice(l);
+            start.push(pairs.len() as u32);
+        }
+        let n = tris.len(); // (3 records per triangle at most)
+        let mut opp = vec![UNWRITTEN; n];
+        let mut arrays = vec![vec![MaybeUninit::new(UNWRITTEN); n]; 3];
+        let [a, b, end] = &mut arrays[..] else {
+            unreachable!()
+        };
+        let out = GroupOut {
+            opp: opp.as_mut_ptr(),
+            tri: &mut [],
+            a,
+            b,
+            end,
+            base: 0,
+            records: 0,
+            edges: 0,
+        };
+        let listings = Listings {
+            start: &start,
+            first: first as usize,
+            pairs: &pairs,
+            tri: &[],
+            narrow: true,
+        };
+        let mut buf = Vec::new();
+        let vertices = first as usize..last as usize + 1;
+        let (records, edges) = if simd {
+            // SAFETY: the caller checked `simd_available`.
+            #[cfg(target_arch = "x86_64")]
+            unsafe {
+                emit_range_avx512(out, &listings, vertices, &mut buf)
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            unreachable!()
+        } else {
+            emit_range::<false>(out, &listings, vertices, &mut buf)
+        };
+        opp.truncate(records);
+        // SAFETY: the emit wrote the first `edges` slots of each.
+        let edge = |i: usize| std::array::from_fn(|x| unsafe { arrays[x][i].assume_init() });
+        (opp, (0..edges).map(edge).collect())
+    }
+
+    /// The AVX-512 emit's 32-bit keys hold every id below `KEY_IDS` − 1,
+    /// the bound its callers keep to (`narrow`), and fail on the next one,
+    /// whose larger endpoint is the padding's: vertices with 2 to 16
+    /// records on the largest ids, in both windings, give what the scalar
+    /// emit gives. Caught (with `KEY_IDS` one larger than the kernel
+    /// takes, the second assertion fails): the bound was the first thing
+    /// written wrong.
+    #[test]
+    fn the_simd_emit_keys_hold_every_id_below_the_bound() {
+        if !simd_available() {
+            return;
+        }
+        let fans = |top: u32| {
+            let mut tris = Vec::new();
+            for i in 0..7u32 {
+                tris.extend_from_slice(&[top - 2, top - 3 - i, top]);
+                tris.extend_from_slice(&[top - 3 - i, top - 1, top]);
+            }
+            // 12 records at top − 20, a third of them on the top id.
+            for i in 0..6u32 {
+                tris.extend_from_slice(&[top - 12 + i % 3, top - 20, top - i / 3]);
+            }
+            tris.extend_from_slice(&[top - 30, top - 20, top - 10]);
+            tris
+        };
+        let tris = fans(KEY_IDS as u32 - 2);
+        let records = |v: u32| {
+            tris.chunks_exact(3).map(move |t| match sort3(t) {
+                (lo, ..) if lo == v => 2,
+                (_, mid, _) if mid == v => 1,
+                _ => 0,
+            })
+        };
+        let most = (0..KEY_IDS as u32 - 1)
+            .rev()
+            .take(40)
+            .map(|v| records(v).sum::<u32>());
+        assert!((9..=16).contains(&most.max().unwrap()));
+        assert_eq!(emit_alone(&tris, true), emit_alone(&tris, false));
+        let tris = fans(KEY_IDS as u32 - 1);
+        assert_ne!(emit_alone(&tris, true), emit_alone(&tris, false));
+        assert!(!Buckets::narrow_for(KEY_IDS) && Buckets::narrow_for(KEY_IDS - 1));
     }
 
     /// Packed listings hold the widest ids their vertex count needs, and
