@@ -116,14 +116,23 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // caps/reference above.
     // `_no_avx512`: the same with the AVX-512 kernels turned off (AVX2 for
     // the caps, the plain loop for the sides): the previous kernels as
-    // peers in the same run.
+    // peers in the same run. `_gathers`: the AVX-512 caps kernel, whose
+    // gathers the CPU's vendor decides on (`evaluate_simd::gather_caps`),
+    // forced on where the CPU has AVX-512, so that the choice is measured
+    // on each machine.
     if let Some(ix) = &d.indexed {
         g.throughput(Throughput::Elements(ix.len() as u64));
-        for (label, off) in [("", false), ("_no_avx512", true)] {
+        for (label, off, gathers) in [
+            ("", false, None),
+            ("_no_avx512", true, None),
+            ("_gathers", false, Some(true)),
+        ] {
             g.bench_function(format!("caps/reference_indexed{label}"), |b| {
                 let mut o = vec![0i8; ix.len()];
                 svpack::evaluate_simd::disable_avx512(off);
+                svpack::evaluate_simd::prefer_gather_caps(gathers);
                 pool.install(|| b.iter(|| ix.cap_signs(light, &mut o)));
+                svpack::evaluate_simd::prefer_gather_caps(None);
                 svpack::evaluate_simd::disable_avx512(false);
             });
         }
@@ -179,13 +188,19 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // What `verify` does per light: one set of output buffers reused
     // across lights (`evaluate_into`); `_fresh` allocates them per light
     // (`evaluate`), which on this machine means first-touch page faults.
-    for (label, off) in [("", false), ("_no_avx512", true)] {
+    for (label, off, gathers) in [
+        ("", false, None),
+        ("_no_avx512", true, None),
+        ("_gathers", false, Some(true)),
+    ] {
         g.bench_function(format!("caps+sides/reference_shared{label}"), |b| {
             let mut ev = svpack::verify::Evaluation::default();
             svpack::evaluate_simd::disable_avx512(off);
+            svpack::evaluate_simd::prefer_gather_caps(gathers);
             pool.install(|| {
                 b.iter(|| svpack::verify::evaluate_into(&d, light, Strategy::Reference, &mut ev))
             });
+            svpack::evaluate_simd::prefer_gather_caps(None);
             svpack::evaluate_simd::disable_avx512(false);
         });
     }

@@ -11,6 +11,7 @@
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
 //! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
+//! cargo run --release --example stage_probe -- evaluate MODEL  # the evaluator's caps and caps + sides, each kernel choice, alternated
 //! cargo run --release --example stage_probe -- replace DIR   # putting a 120 MiB output in place
 //! ```
 //!
@@ -85,10 +86,11 @@ fn main() {
         "passes" => passes(path),
         "fill-write" => fill_write(path),
         "verify" => verify(path),
+        "evaluate" => evaluate(path),
         "replace" => replace(path),
         _ => {
             eprintln!(
-                "unknown step {what:?}: read, build, weld, passes, fill-write, verify or replace"
+                "unknown step {what:?}: read, build, weld, passes, fill-write, verify, evaluate or replace"
             );
             std::process::exit(1);
         }
@@ -187,6 +189,78 @@ fn passes(path: &Path) {
         best[3],
         best[4]
     );
+}
+
+/// The evaluator on MODEL's build, one light, as the evaluate bench's
+/// `caps/reference_indexed` and `caps+sides/reference_shared` run it, with
+/// each choice of kernel: the crate's own (`auto`), the caps' AVX-512
+/// kernel with gathers forced on and off, and every AVX-512 kernel off.
+/// The choices take turns, 40 rounds of 5 runs each, so that all see the
+/// same phases of this machine (criterion runs one after the other);
+/// prints the fastest and the median round per run, in ms.
+fn evaluate(path: &Path) {
+    use svpack::evaluate_simd::{disable_avx512, prefer_gather_caps};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e.svpk");
+    svpack::build::build_file(path, &out, &svpack::build::BuildConfig::default()).unwrap();
+    let file = svpack::format::read_file(&out).unwrap();
+    let d = svpack::verify::decode(&file, 0);
+    let Some(ix) = d.indexed.as_ref() else {
+        eprintln!(
+            "{}: no caps from corner ids (position table too large)",
+            path.display()
+        );
+        std::process::exit(1);
+    };
+    let light = [3.0, 2.5, 4.0, 1.0];
+    let records: usize = d.buckets.iter().map(|b| b.records()).sum();
+    let choices: [(&str, bool, Option<bool>); 4] = [
+        ("auto", false, None),
+        ("gathers", false, Some(true)),
+        ("no gathers", false, Some(false)),
+        ("no AVX-512", true, None),
+    ];
+    let mut times = vec![(Vec::new(), Vec::new()); choices.len()];
+    let mut signs = vec![0i8; ix.len()];
+    let mut ev = svpack::verify::Evaluation::default();
+    let per_run = |t: Instant| t.elapsed().as_secs_f64() * 1e3 / 5.0;
+    for _ in 0..40 {
+        for (&(_, off, gathers), (caps, both)) in choices.iter().zip(&mut times) {
+            disable_avx512(off);
+            prefer_gather_caps(gathers);
+            let t = Instant::now();
+            for _ in 0..5 {
+                ix.cap_signs(light, &mut signs);
+            }
+            caps.push(per_run(t));
+            let t = Instant::now();
+            for _ in 0..5 {
+                svpack::verify::evaluate_into(
+                    &d,
+                    light,
+                    svpack::evaluate::Strategy::Reference,
+                    &mut ev,
+                );
+            }
+            both.push(per_run(t));
+        }
+    }
+    prefer_gather_caps(None);
+    disable_avx512(false);
+    let fastest_median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        (v[0], v[v.len() / 2])
+    };
+    println!("{} triangles, {records} side records", ix.len());
+    for ((name, ..), (caps, both)) in choices.iter().zip(&mut times) {
+        let (cf, cm) = fastest_median(caps);
+        let (bf, bm) = fastest_median(both);
+        println!(
+            "{name}: caps {cf:.3} / {cm:.3} ms, caps + sides {bf:.3} / {bm:.3} ms ({:.2} / {:.2} ns per side record)",
+            bf * 1e6 / records as f64,
+            bm * 1e6 / records as f64
+        );
+    }
 }
 
 /// Where `fill-write`'s caps come from.

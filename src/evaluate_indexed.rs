@@ -157,13 +157,13 @@ impl IndexedCaps {
             .for_each(|((o, t), odd)| self.signs(t, odd, l, on_corner, o));
     }
 
-    /// One chunk, through the AVX-512 version when the CPU has it and the
-    /// table's float offsets fit the gathers' 32-bit indices (with the
-    /// light-on-corner test only when `on_corner`), else AVX2, else the
-    /// plain loop.
+    /// One chunk, through the AVX-512 version where its gathers pay
+    /// (`evaluate_simd::gather_caps`) and the table's float offsets fit
+    /// their 32-bit indices (with the light-on-corner test only when
+    /// `on_corner`), else AVX2, else the plain loop.
     fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, on_corner: bool, out: &mut [i8]) {
         #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::have_avx512() && self.points.len() <= MAX_GATHER_POINTS {
+        if crate::evaluate_simd::gather_caps() && self.points.len() <= MAX_GATHER_POINTS {
             // SAFETY: the CPU has AVX-512F (checked just above); every id is
             // below points.len() (checked by `new`), whose float offsets fit
             // an i32 (checked just above).
@@ -391,6 +391,15 @@ mod tests {
         v.push(("plain", o.clone()));
         ix.cap_signs(l, &mut o);
         v.push(("dispatch", o.clone()));
+        // The dispatch with the gathers' kernel chosen either way (the
+        // setting is the process's; other tests running meanwhile only
+        // get slower or faster).
+        for (name, gathers) in [("dispatch, gathers", true), ("dispatch, no gathers", false)] {
+            crate::evaluate_simd::prefer_gather_caps(Some(gathers));
+            ix.cap_signs(l, &mut o);
+            crate::evaluate_simd::prefer_gather_caps(None);
+            v.push((name, o.clone()));
+        }
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::have_avx2() {
             // SAFETY: only when the CPU has AVX2.

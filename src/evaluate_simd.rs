@@ -244,6 +244,81 @@ pub fn disable_avx512(off: bool) {
     AVX512_OFF.store(off, std::sync::atomic::Ordering::Relaxed);
 }
 
+/// What [`prefer_gather_caps`] set: 0 the CPU's vendor decides, 1 yes, 2 no.
+static GATHER_CAPS: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// Makes [`gather_caps`] answer `Some(yes)` whatever the CPU, or with None
+/// leaves it to the CPU again. For benchmarks, which time the caps kernel
+/// with gathers against the one without in one run; results are bit for
+/// bit the same either way.
+#[doc(hidden)]
+pub fn prefer_gather_caps(choice: Option<bool>) {
+    let v = match choice {
+        None => 0,
+        Some(true) => 1,
+        Some(false) => 2,
+    };
+    GATHER_CAPS.store(v, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Whether the caps from corner ids (`evaluate_indexed`) should take the
+/// AVX-512 kernel, which fetches the corners with gathers, rather than the
+/// AVX2 one, which loads each corner's row and transposes: on Intel CPUs
+/// (not on others) unless [`prefer_gather_caps`] says otherwise, and only
+/// where [`have_avx512`]. Why by vendor: the gathers are fast on Intel and
+/// slow on AMD's Zen 4, and the two CPUs this project's machine has run on
+/// give opposite answers. On a Sapphire Rapids Xeon (sixth round) the
+/// kernel took the shared evaluation of the dragon from 2.8–3.6 to 1.8 ns
+/// per side record; on an EPYC of family 25, model 17 (Zen 4, twenty-fifth
+/// round) the dragon's caps took 3.02 ms with it and 1.84 ms without, the
+/// shared evaluation 5.25 and 3.66 ms (fastest of 40 alternated rounds,
+/// `cargo run --release --example stage_probe -- evaluate
+/// target/dragon/dragon.glb`), while the sides' gathers
+/// (`try_sides_from_caps`) still gained there: 2.48 → 1.75 ms
+/// (`RAYON_NUM_THREADS=1 SVPACK_BENCH_ONLY=dragon_full cargo bench --bench
+/// evaluate -- 'dragon_full/sides_given_caps'`).
+pub(crate) fn gather_caps() -> bool {
+    let setting = GATHER_CAPS.load(std::sync::atomic::Ordering::Relaxed);
+    gather_caps_for(setting, cpu_is_intel) && have_avx512()
+}
+
+/// [`gather_caps`] before the check for AVX-512: the setting (as in
+/// `GATHER_CAPS`), else the vendor (`intel` asked only then).
+fn gather_caps_for(setting: u8, intel: impl FnOnce() -> bool) -> bool {
+    match setting {
+        0 => intel(),
+        v => v == 1,
+    }
+}
+
+/// Whether the CPU's vendor string is Intel's, read once: CPUID traps to
+/// the hypervisor in a virtual machine, and asked per chunk of caps it
+/// took the dragon's caps from 1.7 to 2.6 ms here (a local probe).
+fn cpu_is_intel() -> bool {
+    static INTEL: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *INTEL.get_or_init(read_cpu_is_intel)
+}
+
+/// [`cpu_is_intel`], asked of the CPU.
+fn read_cpu_is_intel() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        // Leaf 0 gives the vendor string in ebx, edx, ecx.
+        #[allow(unused_unsafe)] // (`__cpuid` is safe in newer Rust.)
+        // SAFETY: every x86-64 CPU has the CPUID instruction and leaf 0.
+        let r = unsafe { std::arch::x86_64::__cpuid(0) };
+        let mut vendor = [0u8; 12];
+        for (i, w) in [r.ebx, r.edx, r.ecx].into_iter().enumerate() {
+            vendor[4 * i..4 * i + 4].copy_from_slice(&w.to_le_bytes());
+        }
+        &vendor == b"GenuineIntel"
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// Whether the AVX-512 kernels run: the CPU has AVX-512F (run-time check;
 /// they also use AVX2, which every AVX-512F CPU has) and
 /// [`disable_avx512`] has not turned them off.
@@ -685,6 +760,20 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The caps' choice of kernel follows the benchmarks' setting, and
+    /// with none the CPU's vendor (the setting itself is not changed here:
+    /// other tests set it while they run). Caught: the setting ignored
+    /// (the vendor alone decides).
+    #[test]
+    fn gather_caps_follow_the_setting_then_the_vendor() {
+        for intel in [false, true] {
+            assert_eq!(gather_caps_for(0, || intel), intel);
+            assert!(gather_caps_for(1, || intel));
+            assert!(!gather_caps_for(2, || intel));
+        }
+        assert_eq!(cpu_is_intel(), read_cpu_is_intel());
     }
 
     #[test]
