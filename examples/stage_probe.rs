@@ -65,7 +65,9 @@ fn fastest<T>(n: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [what, file] = &args[..] else {
-        eprintln!("usage: stage_probe read|build|passes|verify FILE");
+        eprintln!(
+            "usage: stage_probe read|build|weld|passes|fill-write|verify|evaluate|replace FILE"
+        );
         std::process::exit(1);
     };
     let path = Path::new(file);
@@ -207,7 +209,7 @@ fn evaluate(path: &Path) {
     let d = svpack::verify::decode(&file, 0);
     let Some(ix) = d.indexed.as_ref() else {
         eprintln!(
-            "{}: no caps from corner ids (position table too large)",
+            "{}: its file has no caps from corner ids (`verify::decode`)",
             path.display()
         );
         std::process::exit(1);

@@ -164,7 +164,7 @@ impl IndexedCaps {
     fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, on_corner: bool, out: &mut [i8]) {
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::gather_caps() && self.points.len() <= MAX_GATHER_POINTS {
-            // SAFETY: the CPU has AVX-512F (checked just above); every id is
+            // SAFETY: the CPU has AVX-512F (`gather_caps` checks it); every id is
             // below points.len() (checked by `new`), whose float offsets fit
             // an i32 (checked just above).
             return unsafe {

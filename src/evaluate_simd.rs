@@ -247,8 +247,8 @@ pub fn disable_avx512(off: bool) {
 /// What [`prefer_gather_caps`] set: 0 the CPU's vendor decides, 1 yes, 2 no.
 static GATHER_CAPS: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
 
-/// Makes [`gather_caps`] answer `Some(yes)` whatever the CPU, or with None
-/// leaves it to the CPU again. For benchmarks, which time the caps kernel
+/// With `Some(yes)`, makes [`gather_caps`] answer `yes` (where the CPU has
+/// AVX-512) whatever its vendor; with None, leaves it to the vendor again. For benchmarks, which time the caps kernel
 /// with gathers against the one without in one run; results are bit for
 /// bit the same either way.
 #[doc(hidden)]

@@ -105,12 +105,13 @@ impl Edges {
 ///    of 4),
 ///    its triangles straight to their final place, and its edges one after
 ///    the other from the group's first record's offset (edges never
-///    outnumber records). Where the CPU has AVX-512, a vertex with at most
-///    8 listings (so at most 16 records) is done in registers
-///    (`emit_range_avx512`): 14.5–15.0 → 7.1–7.6 ms on the dragon, one
-///    thread (`cargo run --release --example stage_probe -- passes`, the
-///    two versions alternated; 9.1–9.3 ms with the kernel for up to 8
-///    records only).
+///    outnumber records). Where the CPU has AVX-512 (and the mesh fewer
+///    than 2^28 vertices), a vertex with at most 8 listings (so at most 16
+///    records) is done in registers (`emit_range_avx512`): 14.5–15.0 →
+///    7.1–7.6 ms on the dragon, one thread, on the earlier Intel host
+///    (`cargo run --release --example stage_probe -- passes`, the two
+///    versions alternated; 9.1–9.3 ms with the kernel for up to 8 records
+///    only).
 /// 4. **Compact**: each group's opposite vertices and edges are moved down
 ///    after the previous groups' (one move per group and array), and the
 ///    listings' memory becomes `opp`.
@@ -1437,7 +1438,8 @@ unsafe fn emit_range_avx512(
             // last edge, which the next vertex's edges overwrite (or which
             // lies past the edges the group returns), except near the
             // arrays' ends. Why: a masked store is slow on this machine's
-            // AMD EPYC: the emit pass's median of five alternations went
+            // AMD EPYC: with the 512-bit stores of the keys' previous form
+            // (c6f213e), the emit pass's median of five alternations went
             // 13.8 → 11.5 ms on the dragon, 78.7 → 66.5 ms on the 5M scene
             // (three), one thread (`RECYCLE=1 cargo run --release --example
             // stage_probe -- passes`). The same for the records, which
