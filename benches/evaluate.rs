@@ -58,6 +58,16 @@ fn shared_bucket(
     )
 }
 
+/// The kernel choices the evaluator's dispatching benches run with: label
+/// suffix, AVX-512 off (`evaluate_simd::disable_avx512`), and the caps'
+/// gathers forced (`evaluate_simd::prefer_gather_caps`; None leaves them
+/// to the CPU's vendor).
+const KERNEL_CHOICES: [(&str, bool, Option<bool>); 3] = [
+    ("", false, None),
+    ("_no_avx512", true, None),
+    ("_gathers", false, Some(true)),
+];
+
 fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("b.svpk");
@@ -122,11 +132,7 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // on each machine.
     if let Some(ix) = &d.indexed {
         g.throughput(Throughput::Elements(ix.len() as u64));
-        for (label, off, gathers) in [
-            ("", false, None),
-            ("_no_avx512", true, None),
-            ("_gathers", false, Some(true)),
-        ] {
+        for (label, off, gathers) in KERNEL_CHOICES {
             g.bench_function(format!("caps/reference_indexed{label}"), |b| {
                 let mut o = vec![0i8; ix.len()];
                 svpack::evaluate_simd::disable_avx512(off);
@@ -188,11 +194,7 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // What `verify` does per light: one set of output buffers reused
     // across lights (`evaluate_into`); `_fresh` allocates them per light
     // (`evaluate`), which on this machine means first-touch page faults.
-    for (label, off, gathers) in [
-        ("", false, None),
-        ("_no_avx512", true, None),
-        ("_gathers", false, Some(true)),
-    ] {
+    for (label, off, gathers) in KERNEL_CHOICES {
         g.bench_function(format!("caps+sides/reference_shared{label}"), |b| {
             let mut ev = svpack::verify::Evaluation::default();
             svpack::evaluate_simd::disable_avx512(off);

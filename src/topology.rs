@@ -1986,11 +1986,10 @@ mod tests {
 
     /// The AVX-512 emit's 32-bit keys hold every id below `KEY_IDS` − 1,
     /// the bound its callers keep to (`narrow`), and fail on the next one,
-    /// whose larger endpoint is the padding's: vertices with 2 to 16
+    /// whose larger endpoint is the padding's: vertices with 2 to 13
     /// records on the largest ids, in both windings, give what the scalar
-    /// emit gives. Caught (with `KEY_IDS` one larger than the kernel
-    /// takes, the second assertion fails): the bound was the first thing
-    /// written wrong.
+    /// emit gives. Caught: `KEY_IDS` one larger than the kernel takes (the
+    /// comparison below `KEY_IDS − 1` then fails).
     #[test]
     fn the_simd_emit_keys_hold_every_id_below_the_bound() {
         if !simd_available() {
