@@ -130,7 +130,7 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // gathers the CPU's vendor decides on (`evaluate_simd::gather_caps`),
     // forced on where the CPU has AVX-512, so that the choice is measured
     // on each machine.
-    if let Some(ix) = &d.indexed {
+    if let Some(ix) = d.ordered.as_ref().map(|o| o.caps()) {
         g.throughput(Throughput::Elements(ix.len() as u64));
         for (label, off, gathers) in KERNEL_CHOICES {
             g.bench_function(format!("caps/reference_indexed{label}"), |b| {
@@ -204,6 +204,25 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             });
             svpack::evaluate_simd::prefer_gather_caps(None);
             svpack::evaluate_simd::disable_avx512(false);
+        });
+    }
+    // The peer of the lines above: the same kernels with the triangles in
+    // input order (the evaluator before `evaluate_ordered`), buffers reused
+    // as above: the caps from ids, then each slot's sign read from the
+    // input-order table through the gathers of `try_sides_from_caps`.
+    if let Some(ix) = svpack::evaluate_indexed::IndexedCaps::new(&d.positions, &d.caps) {
+        g.bench_function("caps+sides/reference_shared_input_order", |b| {
+            let mut caps = vec![0i8; ix.len()];
+            let mut sides: Vec<Vec<i8>> =
+                d.buckets.iter().map(|bk| vec![0; bk.records()]).collect();
+            pool.install(|| {
+                b.iter(|| {
+                    ix.cap_signs(light, &mut caps);
+                    for (bk, m) in d.buckets.iter().zip(&mut sides) {
+                        shared_bucket(side_multiplicities_shared, bk, &caps, light, m);
+                    }
+                })
+            })
         });
     }
     g.bench_function("caps+sides/reference_shared_fresh", |b| {

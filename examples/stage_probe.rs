@@ -196,10 +196,14 @@ fn passes(path: &Path) {
 /// The evaluator on MODEL's build, one light, as the evaluate bench's
 /// `caps/reference_indexed` and `caps+sides/reference_shared` run it, with
 /// each choice of kernel: the crate's own (`auto`), the caps' AVX-512
-/// kernel with gathers forced on and off, and every AVX-512 kernel off.
-/// The choices take turns, 40 rounds of 5 runs each, so that all see the
-/// same phases of this machine (criterion runs one after the other);
-/// prints the fastest and the median round per run, in ms.
+/// kernel with gathers forced on and off, and every AVX-512 kernel off;
+/// and the crate's kernels with the triangles in input order (`input
+/// order`: the evaluator before `evaluate_ordered`, the bench's
+/// `caps+sides/reference_shared_input_order`). The choices take turns, 40
+/// rounds of 5 runs each, so that all see the same phases of this machine
+/// (criterion runs one after the other); prints the fastest and the median
+/// round per run, in ms, and each choice's caps + sides as a multiple of
+/// `auto`'s.
 fn evaluate(path: &Path) {
     use svpack::evaluate_simd::{disable_avx512, prefer_gather_caps};
     let dir = tempfile::tempdir().unwrap();
@@ -207,7 +211,7 @@ fn evaluate(path: &Path) {
     svpack::build::build_file(path, &out, &svpack::build::BuildConfig::default()).unwrap();
     let file = svpack::format::read_file(&out).unwrap();
     let d = svpack::verify::decode(&file, 0);
-    let Some(ix) = d.indexed.as_ref() else {
+    let Some(ix) = d.ordered.as_ref().map(|o| o.caps()) else {
         eprintln!(
             "{}: its file has no caps from corner ids (`verify::decode`)",
             path.display()
@@ -216,20 +220,27 @@ fn evaluate(path: &Path) {
     };
     let light = [3.0, 2.5, 4.0, 1.0];
     let records: usize = d.buckets.iter().map(|b| b.records()).sum();
-    let choices: [(&str, bool, Option<bool>); 4] = [
-        ("auto", false, None),
-        ("gathers", false, Some(true)),
-        ("no gathers", false, Some(false)),
-        ("no AVX-512", true, None),
+    // (name, AVX-512 off, caps' gathers, triangles in input order)
+    let choices: [(&str, bool, Option<bool>, bool); 5] = [
+        ("auto", false, None, false),
+        ("gathers", false, Some(true), false),
+        ("no gathers", false, Some(false), false),
+        ("no AVX-512", true, None, false),
+        ("input order", false, None, true),
     ];
+    let in_input_order = svpack::evaluate_indexed::IndexedCaps::new(&d.positions, &d.caps)
+        .expect("the table that `decode` accepted");
     let mut times = vec![(Vec::new(), Vec::new()); choices.len()];
     let mut signs = vec![0i8; ix.len()];
     let mut ev = svpack::verify::Evaluation::default();
+    let mut sides: Vec<Vec<i8>> = d.buckets.iter().map(|b| vec![0; b.records()]).collect();
     let per_run = |t: Instant| t.elapsed().as_secs_f64() * 1e3 / 5.0;
+    let strategy = svpack::evaluate::Strategy::Reference;
     for _ in 0..40 {
-        for (&(_, off, gathers), (caps, both)) in choices.iter().zip(&mut times) {
+        for (&(_, off, gathers, input), (caps, both)) in choices.iter().zip(&mut times) {
             disable_avx512(off);
             prefer_gather_caps(gathers);
+            let ix = if input { &in_input_order } else { ix };
             let t = Instant::now();
             for _ in 0..5 {
                 ix.cap_signs(light, &mut signs);
@@ -237,16 +248,31 @@ fn evaluate(path: &Path) {
             caps.push(per_run(t));
             let t = Instant::now();
             for _ in 0..5 {
-                svpack::verify::evaluate_into(
-                    &d,
-                    light,
-                    svpack::evaluate::Strategy::Reference,
-                    &mut ev,
-                );
+                if !input {
+                    svpack::verify::evaluate_into(&d, light, strategy, &mut ev);
+                    continue;
+                }
+                ix.cap_signs(light, &mut signs);
+                for (b, m) in d.buckets.iter().zip(&mut sides) {
+                    svpack::evaluate::side_multiplicities_shared(
+                        strategy,
+                        b.k,
+                        &b.data,
+                        &b.slot_tri,
+                        &b.slot_parity,
+                        &signs,
+                        light,
+                        m,
+                    );
+                }
             }
             both.push(per_run(t));
         }
     }
+    assert!(
+        signs == ev.caps && sides == ev.sides,
+        "the input-order path differs"
+    );
     prefer_gather_caps(None);
     disable_avx512(false);
     let fastest_median = |v: &mut Vec<f64>| {
@@ -254,13 +280,16 @@ fn evaluate(path: &Path) {
         (v[0], v[v.len() / 2])
     };
     println!("{} triangles, {records} side records", ix.len());
+    let auto = fastest_median(&mut times[0].1.clone());
     for ((name, ..), (caps, both)) in choices.iter().zip(&mut times) {
         let (cf, cm) = fastest_median(caps);
         let (bf, bm) = fastest_median(both);
         println!(
-            "{name}: caps {cf:.3} / {cm:.3} ms, caps + sides {bf:.3} / {bm:.3} ms ({:.2} / {:.2} ns per side record)",
+            "{name}: caps {cf:.3} / {cm:.3} ms, caps + sides {bf:.3} / {bm:.3} ms ({:.2} / {:.2} ns per side record; {:.2} / {:.2} × auto's)",
             bf * 1e6 / records as f64,
-            bm * 1e6 / records as f64
+            bm * 1e6 / records as f64,
+            bf / auto.0,
+            bm / auto.1
         );
     }
 }

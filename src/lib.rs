@@ -7,6 +7,7 @@ pub mod build;
 pub mod error;
 pub mod evaluate;
 pub mod evaluate_indexed;
+pub mod evaluate_ordered;
 pub mod evaluate_simd;
 pub mod exact;
 pub mod file_bytes;

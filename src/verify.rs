@@ -15,7 +15,7 @@
 //! checks work on integers.
 
 use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
-use crate::evaluate_indexed::IndexedCaps;
+use crate::evaluate_ordered::OrderedEvaluation;
 use crate::format::{Floats, SvpkFile};
 use crate::multiplicity::{Light, cap_corner, side_corner, to_infinity};
 use crate::position_index::{PositionTable, TriangleIndex};
@@ -47,11 +47,13 @@ pub struct Decoded {
     pub cap_first: Vec<u32>,
     /// Side buckets.
     pub buckets: Vec<DecodedBucket>,
-    /// The caps as sorted corner ids into `positions`, for the per-light
-    /// cap signs of [`evaluate`]; `None` when `positions` is not strictly
-    /// increasing (a NaN or a ±0.0 pair), see
-    /// [`crate::evaluate_indexed`].
-    pub indexed: Option<IndexedCaps>,
+    /// The caps as sorted corner ids into `positions`, numbered in the
+    /// order the side records first name them, and the slots as offsets
+    /// into their signs: what [`evaluate`] runs per light for the
+    /// reference strategy ([`crate::evaluate_ordered`]). `None` when
+    /// `positions` is not strictly increasing (a NaN or a ±0.0 pair, see
+    /// [`crate::evaluate_indexed`]); then [`evaluate`] reads the records.
+    pub ordered: Option<OrderedEvaluation>,
 }
 
 /// One sides bucket, decoded.
@@ -140,7 +142,7 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         .par_iter()
         .map(|c| by_corners.get(sort_ids(*c).0).map_or(UNKNOWN, |f| f.0))
         .collect();
-    let buckets = m
+    let buckets: Vec<DecodedBucket> = m
         .buckets
         .iter()
         .map(|b| {
@@ -169,9 +171,14 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
             }
         })
         .collect();
-    let indexed = IndexedCaps::new(&positions, &caps);
+    let slots: Vec<_> = buckets
+        .iter()
+        .map(|b| (b.k, &b.slot_tri[..], &b.slot_parity[..]))
+        .collect();
+    let ordered = OrderedEvaluation::new(&positions, &caps, &slots);
+    drop(slots);
     Decoded {
-        indexed,
+        ordered,
         space: crate::quantize::RecordSpace {
             offset: m.position_offset,
             scale: m.position_scale,
@@ -430,6 +437,9 @@ pub struct Evaluation {
     pub caps: Vec<i8>,
     /// Multiplicity per record, per bucket.
     pub sides: Vec<Vec<i8>>,
+    /// The scratch of [`OrderedEvaluation::cap_signs`], kept between
+    /// lights like the other buffers.
+    scratch: Vec<i8>,
 }
 
 /// Runs the CPU evaluator for `light` over every record.
@@ -441,14 +451,16 @@ pub struct Evaluation {
 /// shader does ([`evaluate_per_record`]), about three times less arithmetic.
 /// Slots without a matching triangle (a damaged file) are evaluated directly.
 ///
-/// For [`Strategy::Reference`] both halves are vectorised: the caps through
-/// [`IndexedCaps::cap_signs`] (corners sorted once per file; 16 triangles
-/// per AVX-512 instruction with gathered corners, or 8 per AVX2
-/// instruction; [`crate::evaluate_simd::cap_signs`] on the records when the
-/// file's table declines it) and the sides through the gathers of
-/// [`crate::evaluate_simd::try_sides_from_caps`] (16 records per step with
-/// AVX-512); results are bit for bit those of the scalar loops
-/// (`crate::evaluate::*_scalar`).
+/// For [`Strategy::Reference`] both halves run on the tables of
+/// [`Decoded::ordered`] ([`crate::evaluate_ordered`]): the caps from corner
+/// ids sorted once per file, vectorised
+/// ([`crate::evaluate_indexed::IndexedCaps`]), numbered in the order the
+/// side records first name them, so that each record's sum reads signs
+/// close to the last record's. When the file's table declines that, the
+/// caps are evaluated on the records ([`crate::evaluate_simd::cap_signs`])
+/// and the sides through the gathers of
+/// [`crate::evaluate_simd::try_sides_from_caps`]. Results are bit for bit
+/// those of the scalar loops (`crate::evaluate::*_scalar`).
 pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
     let mut ev = Evaluation::default();
     evaluate_into(d, light, strategy, &mut ev);
@@ -463,11 +475,14 @@ pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
 /// `caps+sides/reference_shared` against `…_fresh`).
 pub fn evaluate_into(d: &Decoded, light: Light, strategy: Strategy, ev: &mut Evaluation) {
     if strategy == Strategy::Kim {
-        return evaluate_sides(d, light, strategy, false, ev, |b, _, m| {
+        return evaluate_sides(d, light, strategy, ev, |b, _, m| {
             side_multiplicities_with(strategy, b.k, &b.data, light, m)
         });
     }
-    evaluate_sides(d, light, strategy, true, ev, |b, caps, m| {
+    if let (Strategy::Reference, Some(o)) = (strategy, &d.ordered) {
+        return evaluate_ordered(d, o, light, ev);
+    }
+    evaluate_sides(d, light, strategy, ev, |b, caps, m| {
         crate::evaluate::side_multiplicities_shared(
             strategy,
             b.k,
@@ -484,28 +499,51 @@ pub fn evaluate_into(d: &Decoded, light: Light, strategy: Strategy, ev: &mut Eva
 /// [`evaluate`] record by record, exactly as the shaders do it.
 pub fn evaluate_per_record(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
     let mut ev = Evaluation::default();
-    evaluate_sides(d, light, strategy, false, &mut ev, |b, _, m| {
+    evaluate_sides(d, light, strategy, &mut ev, |b, _, m| {
         side_multiplicities_with(strategy, b.k, &b.data, light, m)
     });
     ev
 }
 
-/// Cap signs (from the ids when `by_ids` and the strategy is the
-/// reference, else from the records), then every bucket's multiplicities
-/// through `sides(bucket, caps, out)`, into `ev`'s buffers.
+/// [`evaluate_into`] for the reference strategy on the tables of `o`
+/// (`d.ordered`): the caps, then each bucket's packed blocks, then the
+/// records `o` leaves (a bucket's last records, fewer than a block; blocks
+/// with a slot that names no triangle) through the shared loop.
+fn evaluate_ordered(d: &Decoded, o: &OrderedEvaluation, light: Light, ev: &mut Evaluation) {
+    ev.caps.resize(d.caps.len(), 0);
+    o.cap_signs(light, &mut ev.scratch, &mut ev.caps);
+    ev.sides.resize_with(d.buckets.len(), Vec::new);
+    for (i, (b, m)) in d.buckets.iter().zip(&mut ev.sides).enumerate() {
+        m.resize(b.records(), 0);
+        o.sides(i, &ev.scratch, m);
+        let (k, stride) = (b.k, (2 + b.k) * 4);
+        for r in o.leftovers(i) {
+            let slots = r.start * k..r.end * k;
+            crate::evaluate::side_multiplicities_shared(
+                Strategy::Reference,
+                k,
+                &b.data[r.start * stride..r.end * stride],
+                &b.slot_tri[slots.clone()],
+                &b.slot_parity[slots],
+                &ev.caps,
+                light,
+                &mut m[r.clone()],
+            );
+        }
+    }
+}
+
+/// Cap signs from the records, then every bucket's multiplicities through
+/// `sides(bucket, caps, out)`, into `ev`'s buffers.
 fn evaluate_sides(
     d: &Decoded,
     light: Light,
     strategy: Strategy,
-    by_ids: bool,
     ev: &mut Evaluation,
     sides: impl Fn(&DecodedBucket, &[i8], &mut [i8]),
 ) {
     ev.caps.resize(d.caps.len(), 0);
-    match &d.indexed {
-        Some(ix) if by_ids && strategy == Strategy::Reference => ix.cap_signs(light, &mut ev.caps),
-        _ => cap_signs_with(strategy, &d.caps_data, light, &mut ev.caps),
-    }
+    cap_signs_with(strategy, &d.caps_data, light, &mut ev.caps);
     ev.sides.resize_with(d.buckets.len(), Vec::new);
     for (b, m) in d.buckets.iter().zip(&mut ev.sides) {
         m.resize(b.records(), 0);
@@ -690,7 +728,7 @@ impl ClosednessIndex {
                 .chunks_exact(2 + b.k)
                 .any(|r| r[0] == UNKNOWN || r[1] == UNKNOWN)
         });
-        if unknown_cap || unknown_record || d.indexed.is_none() {
+        if unknown_cap || unknown_record || d.ordered.is_none() {
             return ClosednessIndex::default();
         }
         // (pair key, occurrence with REVERSED set when the edge runs from

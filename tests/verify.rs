@@ -525,8 +525,9 @@ fn shared_evaluation_equals_per_record_evaluation() {
                 .all(|b| b.slot_tri.iter().all(|&t| t != u32::MAX))
         );
         // A built file's position table is strictly increasing, so the
-        // shared path's caps run on sorted corner ids (evaluate_indexed).
-        assert!(d.indexed.is_some(), "{}", input.display());
+        // shared path runs on the caps from sorted corner ids, numbered in
+        // the sides' order (evaluate_ordered).
+        assert!(d.ordered.is_some(), "{}", input.display());
         for light in choose_lights(&d, 24, 5) {
             for s in Strategy::ALL {
                 let (a, b) = (evaluate(&d, light, s), evaluate_per_record(&d, light, s));
@@ -614,7 +615,7 @@ fn signed_zeros_and_nans_decode_in_a_total_order() {
         }
     }
     assert!(
-        d.indexed.is_none(),
+        d.ordered.is_none(),
         "a ±0.0 pair and NaNs: no sorted-id caps"
     );
     let (code, j) = verify_json(&out, &[]);

@@ -1,0 +1,551 @@
+//! The shared evaluation of [`Strategy::Reference`](crate::evaluate::Strategy)
+//! (each caps triangle's sign once, then every side record as the signed
+//! sum of its triangles' signs) with the triangles numbered in the order the
+//! side records first name them.
+//!
+//! Why: the side records are in (A, B) order (format-spec §4.1), a sweep
+//! along x; the caps are in input order. A record's slots read its
+//! triangles' signs, and from a table in input order each read lands
+//! anywhere in it: on the 871k-triangle dragon, 2.6M reads scattered over
+//! 871 KB, nearly every one a first-level cache miss, most of the sides'
+//! time. Numbered in the order the records first name them, the triangles
+//! of 16 consecutive records lie within a few thousand numbers of each
+//! other (on the dragon, every block of 16 within 16,384), so the reads hit
+//! the first-level cache, and each slot's number fits 16 bits over a base
+//! per block. The caps' corners, renumbered in the same order, are closer
+//! too: the caps alone are 12–18% faster. The caller still gets the signs
+//! in input order: one scattered write per triangle, a third as many
+//! accesses as the reads it replaces, but each still a cache miss (about
+//! 0.6 ms on the dragon: the gain is what is left of the sides' 2.6M
+//! misses after it).
+//!
+//! On the dragon, one thread (`cargo run --release --example stage_probe
+//! -- evaluate target/dragon/dragon.glb`, fastest of 40 alternated rounds,
+//! five runs, on an AMD EPYC, Zen 4): the whole evaluation 3.00–3.36 ms
+//! against 3.11–3.53 ms with the same kernels in input order (1.03–1.09×
+//! this path's time at the fastest, 1.03–1.09× at the median); the caps
+//! alone 1.34–1.42 against 1.52–1.66 ms.
+//!
+//! Per light:
+//! 1. The caps, in evaluation order ([`IndexedCaps`] over the triangles
+//!    renumbered so): each sign `s` of triangle `i` is written as the pair
+//!    `(s, −s)` at `2i, 2i + 1` of the *signed* table, and as `s` at the
+//!    triangle's place in input order.
+//! 2. The sides: slot `j` of a record stores `2i + odd` (its triangle and
+//!    whether its corners are an odd permutation of the triangle's, see
+//!    `verify::DecodedBucket::slot_parity`) less its block's base, so its
+//!    contribution `parity · s` is one byte of the signed table, and the
+//!    record's multiplicity is the sum of its slots' bytes.
+//!
+//! The sums are integers of at most `k` terms −1, 0, +1, added with i8
+//! wrapping: the same bits as the plain path's i32 sum truncated to i8
+//! ([`crate::evaluate_simd::try_sides_from_caps`]), and the signs are
+//! [`IndexedCaps`]'s, so the results are bit for bit the other paths'; the
+//! tests compare them. Records the tables cannot hold (a slot that names no
+//! triangle, in a damaged file; a block whose slots span more than 16 bits;
+//! the last records of a bucket, fewer than a block) are left to the caller,
+//! listed by [`OrderedEvaluation::leftovers`].
+
+use crate::evaluate_indexed::IndexedCaps;
+use crate::multiplicity::Light;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Records per block: each block has one base for its slots' 16-bit offsets.
+pub const BLOCK: usize = 16;
+
+/// Triangles per call of the caps kernel, and side records per rayon
+/// task (a multiple of [`BLOCK`]).
+const CHUNK: usize = 4096;
+
+/// Base of a block the tables do not hold.
+const NOT_PACKED: u32 = u32::MAX;
+
+/// A triangle id no slot names: `verify::UNKNOWN`.
+const UNKNOWN: u32 = u32::MAX;
+
+/// One sides bucket's slots as offsets into the signed table.
+#[derive(Debug, Clone)]
+struct PackedSlots {
+    /// Opposite slots per record.
+    k: usize,
+    /// Per block of [`BLOCK`] records: the smallest signed-table index its
+    /// slots read, or [`NOT_PACKED`].
+    base: Vec<u32>,
+    /// Per slot of every whole block: its signed-table index less the
+    /// block's base (0 in blocks not packed).
+    offsets: Vec<u16>,
+    /// Record ranges the tables do not hold, in order.
+    leftovers: Vec<Range<usize>>,
+}
+
+/// The caps in the order the side records first name them, and each
+/// bucket's slots as offsets into the per-light signed table. Built once
+/// per file by [`OrderedEvaluation::new`]; per light,
+/// [`OrderedEvaluation::cap_signs`] then [`OrderedEvaluation::sides`].
+#[derive(Debug, Clone)]
+pub struct OrderedEvaluation {
+    /// The caps triangles in evaluation order.
+    caps: IndexedCaps,
+    /// Per evaluation number: the triangle's number in input order.
+    order: Vec<u32>,
+    /// Per sides bucket, in the file's order.
+    buckets: Vec<PackedSlots>,
+}
+
+/// One bucket's slots as `verify::DecodedBucket` has them: opposite slots
+/// per record, each slot's caps triangle in input order (`u32::MAX` for
+/// none) and its parity (±1, 0 with no triangle).
+pub type Slots<'a> = (usize, &'a [u32], &'a [i8]);
+
+impl OrderedEvaluation {
+    /// Numbers the triangles of `caps` (corner ids into `positions`) in the
+    /// order `buckets`' slots first name them, the rest after them in input
+    /// order, and packs the slots. `None` when [`IndexedCaps::new`]
+    /// declines the table (then callers evaluate the records), when there
+    /// are 2^31 triangles or more, when a slot names a triangle past
+    /// `caps`, or when a bucket has no slots per record (which
+    /// `format::read_file` does not accept).
+    pub fn new(positions: &[[f32; 3]], caps: &[[u32; 3]], buckets: &[Slots]) -> Option<Self> {
+        let n = caps.len();
+        if n >= 1 << 31 || buckets.iter().any(|&(k, ..)| k == 0) {
+            return None;
+        }
+        // rank[t]: triangle t's evaluation number; order: its inverse.
+        let mut rank = vec![u32::MAX; n];
+        let mut order = Vec::with_capacity(n);
+        for &(_, tri, _) in buckets {
+            for &t in tri.iter().filter(|&&t| t != UNKNOWN) {
+                let r = rank.get_mut(t as usize)?;
+                if *r == u32::MAX {
+                    *r = order.len() as u32;
+                    order.push(t);
+                }
+            }
+        }
+        for (t, r) in rank.iter_mut().enumerate() {
+            if *r == u32::MAX {
+                *r = order.len() as u32;
+                order.push(t as u32);
+            }
+        }
+        let in_order: Vec<[u32; 3]> = order.iter().map(|&t| caps[t as usize]).collect();
+        let caps = IndexedCaps::new(positions, &in_order)?;
+        drop(in_order);
+        let buckets = buckets
+            .iter()
+            .map(|&(k, tri, parity)| pack(k, tri, parity, &rank))
+            .collect();
+        Some(OrderedEvaluation {
+            caps,
+            order,
+            buckets,
+        })
+    }
+
+    /// The caps in evaluation order: [`IndexedCaps::cap_signs`] gives
+    /// their signs in that order.
+    pub fn caps(&self) -> &IndexedCaps {
+        &self.caps
+    }
+
+    /// Number of triangles.
+    pub fn len(&self) -> usize {
+        self.order.len()
+    }
+
+    /// True when there are no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.order.is_empty()
+    }
+
+    /// Sign of every caps triangle for light `l`: into `out` in input order
+    /// (`out.len()` must be [`OrderedEvaluation::len`]), and into `scratch`
+    /// (resized to three times that): first the pairs
+    /// [`OrderedEvaluation::sides`] reads, then the signs in evaluation
+    /// order.
+    ///
+    /// The signs are computed in one pass, then paired and sent to their
+    /// places in input order in a second: done per chunk right after the
+    /// signs, the scattered writes made the whole evaluation slower on
+    /// the dragon (0.91–0.94 of the input-order path instead of 0.85–0.88,
+    /// fastest of 60 alternated rounds, three runs).
+    pub fn cap_signs(&self, l: Light, scratch: &mut Vec<i8>, out: &mut [i8]) {
+        let n = self.order.len();
+        assert_eq!(out.len(), n, "caps size mismatch");
+        scratch.resize(3 * n, 0);
+        let (pairs, signs) = scratch.split_at_mut(2 * n);
+        self.caps.cap_signs(l, signs);
+        let out = ScatterTo(out.as_mut_ptr());
+        pairs
+            .par_chunks_mut(2 * CHUNK)
+            .zip(signs.par_chunks(CHUNK))
+            .zip(self.order.par_chunks(CHUNK))
+            .for_each(|((pairs, signs), order)| {
+                for (p, &s) in pairs.chunks_exact_mut(2).zip(signs) {
+                    p[0] = s;
+                    p[1] = s.wrapping_neg();
+                }
+                let out = out.ptr();
+                for (&t, &s) in order.iter().zip(signs) {
+                    // SAFETY: `order` is a permutation of 0..n (`new`
+                    // numbers each triangle once), so every write is inside
+                    // `out` and no two tasks write the same byte.
+                    unsafe { *out.add(t as usize) = s };
+                }
+            });
+    }
+
+    /// Multiplicities of bucket `bucket`'s records from the signed pairs in
+    /// the scratch of [`OrderedEvaluation::cap_signs`] (for the same light),
+    /// into `out` (one per record); the records of
+    /// [`OrderedEvaluation::leftovers`] are left as they are.
+    pub fn sides(&self, bucket: usize, scratch: &[i8], out: &mut [i8]) {
+        let b = &self.buckets[bucket];
+        let n = self.order.len();
+        assert_eq!(scratch.len(), 3 * n, "scratch size mismatch");
+        let signed = &scratch[..2 * n];
+        assert_eq!(out.len() / BLOCK, b.base.len(), "bucket size mismatch");
+        let k = b.k;
+        out.par_chunks_mut(CHUNK)
+            .zip(b.base.par_chunks(CHUNK / BLOCK))
+            .zip(b.offsets.par_chunks(CHUNK * k))
+            .for_each(|((out, base), offsets)| {
+                // SAFETY: every packed block's base + offset is below
+                // 2 · len() (`pack`), which is signed.len() (asserted).
+                unsafe {
+                    match k {
+                        1 => blocks(1, signed, base, offsets, out),
+                        2 => blocks(2, signed, base, offsets, out),
+                        3 => blocks(3, signed, base, offsets, out),
+                        4 => blocks(4, signed, base, offsets, out),
+                        _ => blocks(k, signed, base, offsets, out),
+                    }
+                }
+            });
+    }
+
+    /// Record ranges of bucket `bucket` that [`OrderedEvaluation::sides`]
+    /// leaves to the caller, in order.
+    pub fn leftovers(&self, bucket: usize) -> &[Range<usize>] {
+        &self.buckets[bucket].leftovers
+    }
+}
+
+/// A byte slice the caps' tasks share, each writing bytes no other task
+/// writes.
+struct ScatterTo(*mut i8);
+
+// SAFETY: the tasks write disjoint bytes (see `cap_signs`).
+unsafe impl Sync for ScatterTo {}
+
+impl ScatterTo {
+    /// The slice's first byte. A method, so that closures capture the
+    /// `Sync` wrapper, not the raw pointer inside it.
+    fn ptr(&self) -> *mut i8 {
+        self.0
+    }
+}
+
+/// The slots of one bucket as offsets over a base per block of [`BLOCK`]
+/// records; `rank` gives each triangle's evaluation number.
+fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
+    let per_block = BLOCK * k;
+    let (blocks, records) = (tri.len() / per_block, tri.len() / k);
+    let mut base = vec![NOT_PACKED; blocks];
+    let mut offsets = vec![0u16; blocks * per_block];
+    let mut leftovers: Vec<Range<usize>> = Vec::new();
+    let mut leave = |r: Range<usize>| match leftovers.last_mut() {
+        Some(last) if last.end == r.start => last.end = r.end,
+        _ => leftovers.push(r),
+    };
+    // A slot's signed-table index: 2 · its triangle's number, + 1 when odd.
+    let index = |t: u32, p: i8| match (t, p) {
+        (UNKNOWN, _) | (_, 0) => None,
+        (t, p) => Some(2 * rank[t as usize] + u32::from(p < 0)),
+    };
+    for (b, base) in base.iter_mut().enumerate() {
+        let at = b * per_block..(b + 1) * per_block;
+        let (tri, parity) = (&tri[at.clone()], &parity[at.clone()]);
+        let span = tri
+            .iter()
+            .zip(parity)
+            .try_fold((u32::MAX, 0), |(lo, hi), (&t, &p)| {
+                index(t, p).map(|i| (lo.min(i), hi.max(i)))
+            });
+        match span {
+            Some((lo, hi)) if hi - lo <= u16::MAX as u32 => {
+                *base = lo;
+                for ((o, &t), &p) in offsets[at].iter_mut().zip(tri).zip(parity) {
+                    // Some: every slot of the block was checked just above.
+                    *o = (index(t, p).unwrap() - lo) as u16;
+                }
+            }
+            _ => leave(b * BLOCK..(b + 1) * BLOCK),
+        }
+    }
+    if records > blocks * BLOCK {
+        leave(blocks * BLOCK..records);
+    }
+    PackedSlots {
+        k,
+        base,
+        offsets,
+        leftovers,
+    }
+}
+
+/// Every packed block of `base` (records of `k` slots): each record's sum of
+/// its slots' bytes of `signed`. Inlined into each of the callers' arms, so
+/// that a constant `k` unrolls the slot loop.
+///
+/// # Safety
+/// For every block whose base is not [`NOT_PACKED`], base + each of its
+/// offsets must be below `signed.len()`.
+#[inline(always)]
+unsafe fn blocks(k: usize, signed: &[i8], base: &[u32], offsets: &[u16], out: &mut [i8]) {
+    for ((out, &b), offsets) in out
+        .chunks_exact_mut(BLOCK)
+        .zip(base)
+        .zip(offsets.chunks_exact(BLOCK * k))
+    {
+        if b == NOT_PACKED {
+            continue;
+        }
+        let signed = &signed[b as usize..];
+        for (m, s) in out.iter_mut().zip(offsets.chunks_exact(k)) {
+            let mut sum = 0i8;
+            for &o in s {
+                // SAFETY: the caller's.
+                sum = sum.wrapping_add(unsafe { *signed.get_unchecked(o as usize) });
+            }
+            *m = sum;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Against the input-order path ([`IndexedCaps`] over the caps as given,
+    //! then each slot's `parity · sign` summed), bit for bit: buckets of
+    //! every slot count the kernels specialise and one they do not, tails
+    //! shorter than a block, slots that name no triangle, blocks whose slots
+    //! span more than 16 bits, lights on a corner and directional lights,
+    //! one thread and two.
+    use super::*;
+    use crate::multiplicity::test_bits;
+
+    /// A strictly increasing table (x strictly increasing), with shared
+    /// y and z values so that the sorted corner order has ties to break.
+    fn table(n: usize) -> Vec<[f32; 3]> {
+        (0..n)
+            .map(|i| {
+                [
+                    i as f32 * 0.25 - 40.0,
+                    (i % 7) as f32 - 3.0,
+                    (i % 5) as f32 * 0.5,
+                ]
+            })
+            .collect()
+    }
+
+    /// `n` triangles over `points` points, their corners near each other
+    /// (as on a mesh), in random stored orders.
+    fn triangles(n: usize, points: usize, seed: u64) -> Vec<[u32; 3]> {
+        let mut next = test_bits(seed);
+        (0..n)
+            .map(|_| {
+                let a = (next() % (points as u64 - 8)) as u32;
+                let b = a + 1 + (next() % 4) as u32;
+                let c = a + 1 + (next() % 7) as u32;
+                match next() % 3 {
+                    0 => [a, b, c],
+                    1 => [c, a, b],
+                    _ => [b, a, c],
+                }
+            })
+            .collect()
+    }
+
+    /// A bucket of `records` records of `k` slots: triangles named near
+    /// the record's place (as the sides' (A, B) order does), parities ±1,
+    /// and every `unknown`-th slot naming no triangle (0 means none).
+    fn bucket(
+        k: usize,
+        records: usize,
+        tris: usize,
+        unknown: usize,
+        seed: u64,
+    ) -> (Vec<u32>, Vec<i8>) {
+        let mut next = test_bits(seed);
+        (0..records * k)
+            .map(|j| {
+                if unknown > 0 && j % unknown == unknown - 1 {
+                    return (UNKNOWN, 0);
+                }
+                let near = j / k * tris / records.max(1);
+                let t = (near + (next() % 40) as usize).min(tris - 1) as u32;
+                (t, if next().is_multiple_of(2) { 1 } else { -1 })
+            })
+            .unzip()
+    }
+
+    /// The input-order oracle: the caps' signs, and per record the sum of
+    /// `parity · sign` over its slots (None where a slot names no triangle).
+    fn oracle(
+        positions: &[[f32; 3]],
+        caps: &[[u32; 3]],
+        buckets: &[(usize, Vec<u32>, Vec<i8>)],
+        l: Light,
+    ) -> (Vec<i8>, Vec<Vec<Option<i8>>>) {
+        let ix = IndexedCaps::new(positions, caps).unwrap();
+        let mut signs = vec![0i8; caps.len()];
+        ix.cap_signs(l, &mut signs);
+        let sides = buckets
+            .iter()
+            .map(|(k, tri, parity)| {
+                tri.chunks_exact(*k)
+                    .zip(parity.chunks_exact(*k))
+                    .map(|(t, p)| {
+                        t.iter().zip(p).try_fold(0i32, |sum, (&t, &p)| {
+                            let s = *signs.get(t as usize)?;
+                            Some(sum + p as i32 * s as i32)
+                        })
+                    })
+                    .map(|m| m.map(|m| m as i8))
+                    .collect()
+            })
+            .collect();
+        (signs, sides)
+    }
+
+    /// Runs `o` for `l` and checks it against the oracle: every record
+    /// outside the leftovers equal, every record with an unknown slot
+    /// among the leftovers. Returns how many records were left over.
+    fn check(
+        o: &OrderedEvaluation,
+        positions: &[[f32; 3]],
+        caps: &[[u32; 3]],
+        buckets: &[(usize, Vec<u32>, Vec<i8>)],
+        l: Light,
+    ) -> usize {
+        let (signs, sides) = oracle(positions, caps, buckets, l);
+        let mut scratch = Vec::new();
+        let mut out = vec![0i8; caps.len()];
+        o.cap_signs(l, &mut scratch, &mut out);
+        assert!(out == signs, "caps differ for {l:?}");
+        let mut left = 0;
+        for (i, want) in sides.iter().enumerate() {
+            // A value no record can have, so that a record the kernel
+            // skipped without listing it is caught.
+            let mut m = vec![i8::MIN; want.len()];
+            o.sides(i, &scratch, &mut m);
+            let mut listed = vec![false; want.len()];
+            for r in o.leftovers(i) {
+                left += r.len();
+                listed[r.clone()].iter_mut().for_each(|x| *x = true);
+            }
+            for (r, (&got, &want)) in m.iter().zip(want).enumerate() {
+                match want {
+                    None => assert!(
+                        listed[r],
+                        "bucket {i} record {r}: unknown slot not left over"
+                    ),
+                    Some(_) if listed[r] => {}
+                    Some(w) => assert_eq!(got, w, "bucket {i} record {r} for {l:?}"),
+                }
+            }
+        }
+        left
+    }
+
+    #[test]
+    fn equals_the_input_order_path_bit_for_bit() {
+        let positions = table(3000);
+        let caps = triangles(5000, positions.len(), 11);
+        // Slot counts 1–4 (specialised) and 6 (the general loop); record
+        // counts that leave tails; one bucket with unknown slots.
+        let buckets: Vec<(usize, Vec<u32>, Vec<i8>)> = [
+            (1, 1003, 0),
+            (2, 2500, 0),
+            (3, 800, 97),
+            (4, 161, 0),
+            (6, 90, 0),
+        ]
+        .iter()
+        .enumerate()
+        .map(|(s, &(k, records, unknown))| {
+            let (tri, parity) = bucket(k, records, caps.len(), unknown, 100 + s as u64);
+            (k, tri, parity)
+        })
+        .collect();
+        let slots: Vec<Slots> = buckets
+            .iter()
+            .map(|(k, t, p)| (*k, &t[..], &p[..]))
+            .collect();
+        let o = OrderedEvaluation::new(&positions, &caps, &slots).unwrap();
+        let on_corner = {
+            let p = positions[caps[17][1] as usize];
+            [p[0], p[1], p[2], 1.0]
+        };
+        let lights = [
+            [3.0, 2.5, 4.0, 1.0],
+            [-10.0, 0.5, -2.0, 1.0],
+            [0.3, -1.0, 0.2, 0.0],
+            on_corner,
+        ];
+        for pool in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(pool)
+                .build()
+                .unwrap();
+            for l in lights {
+                let left = pool.install(|| check(&o, &positions, &caps, &buckets, l));
+                // The tails, the blocks with an unknown slot (those of the
+                // k = 3 bucket with a slot j ≡ 96 mod 97), nothing else.
+                let tails: usize = buckets.iter().map(|(k, t, _)| t.len() / k % BLOCK).sum();
+                let with_unknown = (0..800 / BLOCK)
+                    .filter(|b| (b * 3 * BLOCK..(b + 1) * 3 * BLOCK).any(|j| j % 97 == 96))
+                    .count();
+                assert_eq!(left, tails + with_unknown * BLOCK);
+            }
+        }
+    }
+
+    #[test]
+    fn a_block_spanning_more_than_16_bits_is_left_to_the_caller() {
+        // Records 0..40,000 name triangles 0..40,000 one each (evaluation
+        // numbers in that order); then one block names triangles 0 and
+        // 39,999: 2 · 39,999 apart in the signed table, more than 16 bits.
+        let positions = table(3000);
+        let n = 40_000;
+        let caps = triangles(n, positions.len(), 5);
+        let mut tri: Vec<u32> = (0..n as u32).collect();
+        tri.extend((0..BLOCK as u32).map(|r| if r == 3 { n as u32 - 1 } else { r }));
+        let parity = vec![1i8; tri.len()];
+        let buckets = vec![(1, tri, parity)];
+        let slots: Vec<Slots> = buckets
+            .iter()
+            .map(|(k, t, p)| (*k, &t[..], &p[..]))
+            .collect();
+        let o = OrderedEvaluation::new(&positions, &caps, &slots).unwrap();
+        assert_eq!(o.leftovers(0).to_vec(), vec![n..n + BLOCK]);
+        let left = check(&o, &positions, &caps, &buckets, [1.0, 2.0, 3.0, 1.0]);
+        assert_eq!(left, BLOCK);
+    }
+
+    #[test]
+    fn declines_what_the_tables_cannot_hold() {
+        let positions = table(10);
+        let caps = vec![[0, 1, 2], [2, 3, 4]];
+        let (tri, parity) = (vec![0u32, 1], vec![1i8, -1]);
+        assert!(OrderedEvaluation::new(&positions, &caps, &[(1, &tri, &parity)]).is_some());
+        // A slot past the caps; a bucket without slots; a table
+        // `IndexedCaps` declines.
+        assert!(OrderedEvaluation::new(&positions, &caps, &[(1, &[0, 2], &parity)]).is_none());
+        assert!(OrderedEvaluation::new(&positions, &caps, &[(0, &[], &[])]).is_none());
+        let mut unsorted = positions.clone();
+        unsorted.swap(3, 4);
+        assert!(OrderedEvaluation::new(&unsorted, &caps, &[(1, &tri, &parity)]).is_none());
+    }
+}
