@@ -13,18 +13,20 @@
 //! other (on the dragon, every block of 16 within 16,384), so the reads hit
 //! the first-level cache, and each slot's number fits 16 bits over a base
 //! per block. The caps' corners, renumbered in the same order, are closer
-//! too: the caps alone are 12–18% faster. The caller still gets the signs
-//! in input order: one scattered write per triangle, a third as many
-//! accesses as the reads it replaces, but each still a cache miss (about
-//! 0.6 ms on the dragon: the gain is what is left of the sides' 2.6M
-//! misses after it).
+//! too. The caller still gets the signs in input order: one scattered
+//! write per triangle, a third as many accesses as the reads it replaces,
+//! but each still a cache miss, which takes most of what the sides gain.
 //!
 //! On the dragon, one thread (`cargo run --release --example stage_probe
-//! -- evaluate target/dragon/dragon.glb`, fastest of 40 alternated rounds,
-//! five runs, on an AMD EPYC, Zen 4): the whole evaluation 3.00–3.36 ms
-//! against 3.11–3.53 ms with the same kernels in input order (1.03–1.09×
-//! this path's time at the fastest, 1.03–1.09× at the median); the caps
-//! alone 1.34–1.42 against 1.52–1.66 ms.
+//! -- evaluate target/dragon/dragon.glb`, its `auto` and `input order`
+//! rows: fastest / median of 40 alternated rounds, five runs, on an AMD
+//! EPYC, Zen 4): the whole evaluation 3.01–3.48 / 3.33–3.83 ms here
+//! against 2.97–3.67 / 3.46–4.34 ms with the same kernels in input order,
+//! which took 0.99–1.06× this path's time at the fastest and 1.02–1.13× at
+//! the median; the caps alone 1.31–1.44 against 1.51–1.72 ms at the
+//! fastest. Local probes put the rest at about 0.45 ms for the scattered
+//! writes and 0.85 ms for the sides (2.3–2.5 ms for the sides in input
+//! order with their gathers, the caps computed once).
 //!
 //! Per light:
 //! 1. The caps, in evaluation order ([`IndexedCaps`] over the triangles
