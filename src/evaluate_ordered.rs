@@ -170,8 +170,9 @@ impl OrderedEvaluation {
     /// The signs are computed in one pass, then paired and sent to their
     /// places in input order in a second: done per chunk right after the
     /// signs, the scattered writes made the whole evaluation slower on
-    /// the dragon (0.91–0.94 of the input-order path instead of 0.85–0.88,
-    /// fastest of 60 alternated rounds, three runs).
+    /// the dragon (0.91–0.94 of the input-order path's time instead of
+    /// 0.85–0.88, fastest of 60 alternated rounds, three runs of a local
+    /// probe; benches/ROUNDS.md, Twenty-sixth round).
     pub fn cap_signs(&self, l: Light, scratch: &mut Vec<i8>, out: &mut [i8]) {
         let n = self.order.len();
         assert_eq!(out.len(), n, "caps size mismatch");
@@ -221,6 +222,7 @@ impl OrderedEvaluation {
                         2 => blocks(2, signed, base, offsets, out),
                         3 => blocks(3, signed, base, offsets, out),
                         4 => blocks(4, signed, base, offsets, out),
+                        5 => blocks(5, signed, base, offsets, out),
                         _ => blocks(k, signed, base, offsets, out),
                     }
                 }
