@@ -508,7 +508,8 @@ pub fn evaluate_per_record(d: &Decoded, light: Light, strategy: Strategy) -> Eva
 /// [`evaluate_into`] for the reference strategy on the tables of `o`
 /// (`d.ordered`): the caps, then each bucket's packed blocks, then the
 /// records `o` leaves (a bucket's last records, fewer than a block; blocks
-/// with a slot that names no triangle) through the shared loop.
+/// with a slot that names no triangle or slots more than 16 bits apart)
+/// through the shared loop.
 fn evaluate_ordered(d: &Decoded, o: &OrderedEvaluation, light: Light, ev: &mut Evaluation) {
     ev.caps.resize(d.caps.len(), 0);
     o.cap_signs(light, &mut ev.scratch, &mut ev.caps);
