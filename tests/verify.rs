@@ -465,6 +465,53 @@ fn closedness_counts_what_sorting_every_edge_counts() {
     );
 }
 
+/// A damaged file whose side records name triangles the caps do not have:
+/// the ordered evaluation (`evaluate_ordered`) leaves those records' blocks
+/// to the input-order loop, and the whole evaluation still equals
+/// evaluating every record as the shaders do.
+#[test]
+fn ordered_evaluation_of_a_damaged_file_equals_per_record_evaluation() {
+    #[path = "../examples/sphere.rs"]
+    mod sphere;
+    use svpack::verify::{UNKNOWN, choose_lights, evaluate_per_record};
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("sphere.obj");
+    std::fs::write(&src, sphere::sphere_obj(40)).unwrap();
+    let out = tmp.path().join("sphere.svpk");
+    svpack::build::build_file(&src, &out, &Default::default()).unwrap();
+    // The first opposite vertex of every 50th record of the first bucket
+    // moved off the sphere: its slot names no caps triangle.
+    patch_payload(&out, |p, h| {
+        let b = &h.meshes[0].buckets[0];
+        let stride = (2 + b.k as usize) * 16;
+        let start = (b.offset - h.payload_offset) as usize;
+        for r in (0..b.instances as usize).step_by(50) {
+            let at = start + r * stride + 32;
+            p[at..at + 4].copy_from_slice(&7.5f32.to_le_bytes());
+        }
+    });
+    let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+    let o = d.ordered.as_ref().expect("a built file's table");
+    let b = &d.buckets[0];
+    let unknown = b.slot_tri.iter().filter(|&&t| t == UNKNOWN).count();
+    assert_eq!(unknown, b.records().div_ceil(50));
+    // Left over: each whole block of 16 records with an unknown slot, and
+    // the bucket's tail.
+    let block = svpack::evaluate_ordered::BLOCK;
+    let whole = b.records() / block;
+    let with_unknown = (0..whole)
+        .filter(|&i| (i * block..(i + 1) * block).any(|r| r % 50 == 0))
+        .count();
+    let left: usize = o.leftovers(0).iter().map(|r| r.len()).sum();
+    assert_eq!(left, with_unknown * block + b.records() % block);
+    for light in choose_lights(&d, 8, 3) {
+        let got = evaluate(&d, light, Strategy::Reference);
+        let want = evaluate_per_record(&d, light, Strategy::Reference);
+        assert!(got.caps == want.caps, "caps differ for {light:?}");
+        assert!(got.sides == want.sides, "sides differ for {light:?}");
+    }
+}
+
 /// A damaged file's side record may name a position no cap has (`UNKNOWN`
 /// in the decoded ids): the check counts it, it does not panic.
 #[test]
