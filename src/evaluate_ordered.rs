@@ -50,6 +50,7 @@
 
 use crate::evaluate_indexed::IndexedCaps;
 use crate::multiplicity::Light;
+use crate::verify::UNKNOWN;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -62,9 +63,6 @@ const CHUNK: usize = 4096;
 
 /// Base of a block the tables do not hold.
 const NOT_PACKED: u32 = u32::MAX;
-
-/// A triangle id no slot names: `verify::UNKNOWN`.
-const UNKNOWN: u32 = u32::MAX;
 
 /// One sides bucket's slots as offsets into the signed table.
 #[derive(Debug, Clone)]

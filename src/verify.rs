@@ -176,7 +176,6 @@ pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
         .map(|b| (b.k, &b.slot_tri[..], &b.slot_parity[..]))
         .collect();
     let ordered = OrderedEvaluation::new(&positions, &caps, &slots);
-    drop(slots);
     Decoded {
         ordered,
         space: crate::quantize::RecordSpace {
