@@ -40,7 +40,9 @@
 //!   matching), i.e. "soup in, adjacency out" for both; and
 //!   `weld+topology+layout/ours_buckets/*`: weld, topology and the bucket
 //!   counts (`layout::Plan`) without filling any buffer, which is all an
-//!   uncompressed build does before writing.
+//!   uncompressed build does before writing; `ours_buckets_kept/*` the same
+//!   with freed blocks kept between iterations (`alloc::KeepFreed`), as a
+//!   batch's later inputs see them.
 //!
 //! Inputs: dragon_res4, armadillo and 2CylinderEngine from ../shared/meshes,
 //! the full Stanford dragon when `benches/fetch_dragon.sh` has fetched it,
@@ -157,14 +159,15 @@ fn payload(m: &Mesh) -> MeshPayload<'_> {
     }
 }
 
-fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
-    let adapter = meshopt::VertexDataAdapter::new(
-        meshopt::typed_to_bytes(positions),
-        std::mem::size_of::<[f32; 3]>(),
-        0,
-    )
-    .unwrap();
-    meshopt::generate_adjacency_indices(indices, &adapter)
+/// What an uncompressed build does before its write stage (which fills the
+/// records straight into the file): weld, topology with its statistics,
+/// and the bucket counts.
+fn ours_buckets(soup: &Soup) -> (Welded, Edges, topology::EdgeStats, layout::Plan) {
+    let w = weld::weld_without_sources(&soup.positions, &soup.indices);
+    let e = topology::build_edges_opposites_only(&w.triangles, w.positions.len());
+    let stats = topology::edge_stats(&e);
+    let plan = layout::Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
+    (w, e, stats, plan)
 }
 
 fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
@@ -244,7 +247,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     });
     g.bench_function(format!("meshopt_adjacency/{n}"), |b| {
         b.iter(|| {
-            meshopt_adjacency(
+            peers::meshopt_adjacency(
                 black_box(&m.welded.positions),
                 black_box(&m.welded.triangles),
             )
@@ -392,23 +395,25 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     g.bench_function(format!("ours/{n}"), |b| {
         b.iter(|| build_soup(black_box(&m.soup), DEFAULT_MAX_MULT))
     });
-    // What an uncompressed build does before its write stage (which fills
-    // the records straight into the file): weld, topology with its
-    // statistics, and the bucket counts.
     g.bench_function(format!("ours_buckets/{n}"), |b| {
-        b.iter(|| {
-            let w = weld::weld_without_sources(
-                black_box(&m.soup.positions),
-                black_box(&m.soup.indices),
-            );
-            let e = topology::build_edges_opposites_only(&w.triangles, w.positions.len());
-            let stats = topology::edge_stats(&e);
-            let plan = layout::Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
-            (w, e, stats, plan)
-        })
+        b.iter(|| ours_buckets(black_box(&m.soup)))
+    });
+    // The same under an `alloc::KeepFreed` guard held across the
+    // iterations, so that each run gets the blocks the run before freed,
+    // as a batch's later inputs do: without it every run faults in fresh
+    // pages, while meshoptimizer's own buffers (C++, glibc's malloc) are
+    // served from memory the runs before freed, but for the ones above
+    // glibc's mmap threshold (on the dragon 8,193–8,203 small-page faults
+    // a run, against ours 11,311–11,707 with the huge-page hint paused:
+    // `stage_probe -- buckets`, twenty-seventh round).
+    g.bench_function(format!("ours_buckets_kept/{n}"), |b| {
+        let _keep = svpack::alloc::KeepFreed::new();
+        b.iter(|| ours_buckets(black_box(&m.soup)))
     });
     g.bench_function(format!("meshopt_adjacency/{n}"), |b| {
-        b.iter(|| meshopt_adjacency(black_box(&m.soup.positions), black_box(&m.soup.indices)))
+        b.iter(|| {
+            peers::meshopt_adjacency(black_box(&m.soup.positions), black_box(&m.soup.indices))
+        })
     });
     g.finish();
 }

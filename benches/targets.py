@@ -24,7 +24,9 @@ What it runs (the README's "Performance" section explains each target):
 - criterion, one thread (`RAYON_NUM_THREADS=1`), on the dragon:
   `weld+topology+layout/ours_buckets` against meshoptimizer's
   `weld+topology+layout/meshopt_adjacency` in the same group
-  (`benches/stages.rs`), and the evaluator
+  (`benches/stages.rs`; `ours_buckets_kept`, with freed memory kept
+  between iterations, beside them: the target counts as met only on the
+  fresh-memory figure), and the evaluator
   `evaluate/dragon_full/caps+sides/reference_shared` per side record
   (`benches/evaluate.rs`); medians of criterion's samples;
 - `benches/load_overhead.rs` on the dragon as OBJ and as binary glTF:
@@ -125,9 +127,10 @@ def measure_criterion():
     one = {"RAYON_NUM_THREADS": "1", "SVPACK_BENCH_ONLY": "dragon_full"}
     common = ["--warm-up-time", "1", "--measurement-time", "3"]
     run(["cargo", "bench", "--bench", "stages", "--"] + common +
-        [r"^weld\+topology\+layout/(ours_buckets|meshopt_adjacency)/dragon_full$"],
+        [r"^weld\+topology\+layout/(ours_buckets|ours_buckets_kept|meshopt_adjacency)/dragon_full$"],
         env=one, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ours = criterion_median("weld+topology+layout", "ours_buckets_dragon_full")
+    kept = criterion_median("weld+topology+layout", "ours_buckets_kept_dragon_full")
     peer = criterion_median("weld+topology+layout", "meshopt_adjacency_dragon_full")
     run(["cargo", "bench", "--bench", "evaluate", "--"] + common +
         [r"^evaluate/dragon_full/caps\+sides/reference_shared$"],
@@ -144,7 +147,7 @@ def measure_criterion():
             # "fastest, median of rounds" with 1 and with 2 threads.
             overhead[cells[0]] = tuple(float(c.split(",")[1].strip().rstrip("%"))
                                        for c in (cells[6], cells[7]))
-    return ours, peer, evaluate, overhead
+    return ours, kept, peer, evaluate, overhead
 
 
 def row(target, measured, met):
@@ -192,11 +195,14 @@ def main():
     print("|---|---|---|")
     if not no_criterion:
         print("criterion benches (one thread) and load_overhead", file=sys.stderr)
-        ours, peer, evaluate, overhead = measure_criterion()
+        ours, kept, peer, evaluate, overhead = measure_criterion()
         ratio = ours / peer
+        # Met on the fresh-memory figure; the kept one is shown beside it.
         row("weld + topology + buckets ≤ 1/10 of meshopt's adjacency, one thread (dragon)",
-            f"{ours / 1e6:.1f} ms against {peer / 1e6:.1f} ms: **{ratio:.2f}**",
-            "yes" if ratio <= 0.1 else "no")
+            f"{ours / 1e6:.1f} ms against {peer / 1e6:.1f} ms: **{ratio:.2f}**; with freed "
+            f"memory kept between runs, as meshoptimizer's malloc keeps most of its own: "
+            f"{kept / 1e6:.1f} ms, {kept / peer:.2f}",
+            "yes" if ratio <= 0.1 else ("with memory kept" if kept / peer <= 0.1 else "no"))
     for name, times, _, sizes, _ in results:
         n = sizes["triangles"]
         fast, med = min(times[1]), statistics.median(times[1])

@@ -9,6 +9,7 @@
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld and its steps, memory recycled, and std's sort of its words
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
+//! cargo run --release --example stage_probe -- buckets MODEL # weld + topology + bucket counts (the stages bench's `ours_buckets`), then meshoptimizer's adjacency, with their page faults
 //! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
 //! cargo run --release --example stage_probe -- evaluate MODEL  # the evaluator's caps and caps + sides, each kernel choice, alternated
@@ -43,7 +44,7 @@ use std::path::Path;
 use std::time::Instant;
 
 #[path = "../benches/common/peers.rs"]
-#[allow(dead_code)] // (Only the weld's peer is used here.)
+#[allow(dead_code)] // (Only the weld's and the topology's peers are used here.)
 mod peers;
 
 #[global_allocator]
@@ -66,7 +67,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [what, file] = &args[..] else {
         eprintln!(
-            "usage: stage_probe read|build|weld|passes|fill-write|verify|evaluate|replace FILE"
+            "usage: stage_probe read|build|weld|passes|buckets|fill-write|verify|evaluate|replace FILE"
         );
         std::process::exit(1);
     };
@@ -86,13 +87,14 @@ fn main() {
         "build" => build(path),
         "weld" => weld_recycled(path),
         "passes" => passes(path),
+        "buckets" => buckets(path),
         "fill-write" => fill_write(path),
         "verify" => verify(path),
         "evaluate" => evaluate(path),
         "replace" => replace(path),
         _ => {
             eprintln!(
-                "unknown step {what:?}: read, build, weld, passes, fill-write, verify, evaluate or replace"
+                "unknown step {what:?}: read, build, weld, passes, buckets, fill-write, verify, evaluate or replace"
             );
             std::process::exit(1);
         }
@@ -482,6 +484,58 @@ fn build(path: &Path) {
          caps fill {caps_ms:.2} ms, sides fill {sides_ms:.2} ms",
         w.triangle_count()
     );
+}
+
+/// Weld, topology with its statistics and the bucket counts, as the stages
+/// bench's `weld+topology+layout/ours_buckets` runs them, then its peer,
+/// meshoptimizer's adjacency from the same soup: 30 runs of ours and 10 of
+/// the peer, the fastest and median times and the median number of page
+/// faults per run (`getrusage`'s minor faults: one per huge page or small
+/// page faulted in). With `RECYCLE=1` our runs after the first should
+/// fault in nothing, the blocks the run before freed being kept: that they
+/// did (14–16 huge pages a run on the dragon until freed blocks that touch
+/// were joined, `alloc`, twenty-seventh round) is what this step showed.
+/// The peer's C++ buffers come from glibc's malloc, which serves them
+/// from memory earlier runs freed, but for those above its mmap threshold.
+fn buckets(path: &Path) {
+    use svpack::layout::{DEFAULT_MAX_MULT, Plan};
+    let soup = svpack::load::load(path).unwrap();
+    let faults = || {
+        // SAFETY: `getrusage` writes the struct it is given.
+        let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+        unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+        u.ru_minflt
+    };
+    let runs = |name: &str, n: usize, f: &dyn Fn()| {
+        let mut times = Vec::new();
+        let mut counts = Vec::new();
+        for _ in 0..n {
+            let before = faults();
+            let t = Instant::now();
+            f();
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+            counts.push(faults() - before);
+        }
+        let first = counts[0];
+        times.sort_by(f64::total_cmp);
+        counts.sort_unstable();
+        println!(
+            "{name}: fastest {:.2} ms, median {:.2} ms; page faults: {first} in the first run, median {} a run",
+            times[0],
+            times[n / 2],
+            counts[n / 2]
+        );
+    };
+    runs("weld + topology + buckets", 30, &|| {
+        let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
+        let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
+        let stats = svpack::topology::edge_stats(&e);
+        let plan = Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
+        std::hint::black_box((w, e, stats, plan));
+    });
+    runs("meshoptimizer's adjacency", 10, &|| {
+        std::hint::black_box(peers::meshopt_adjacency(&soup.positions, &soup.indices));
+    });
 }
 
 /// What putting a finished 120 MiB output in place costs in directory

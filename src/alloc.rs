@@ -223,26 +223,55 @@ static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
     std::sync::Mutex::new([(0, 0); CACHE_SLOTS]);
 
 /// Keeps the freed block `p` (a mapping of `span` bytes) for reuse if a
-/// [`KeepFreed`] guard lives, a slot is free and the cache stays within
-/// [`CACHE_BYTES`]; false otherwise.
+/// [`KeepFreed`] guard lives, joined with the kept blocks it touches (see
+/// below), when a slot is free and the cache stays within [`CACHE_BYTES`].
+/// Returns the block when it is not kept (the cache then unchanged), for
+/// the caller to unmap.
+///
+/// Why join: a kept block is cut to the size asked for and its tail kept
+/// on its own, and a block too short is grown with `mremap`, whose new
+/// tail is fresh memory. Without joining, a loop that frees and asks again
+/// for the same buffers cut its blocks into ever smaller pieces, filled the
+/// slots with them and grew the pieces back with fresh pages: 16 huge
+/// pages faulted in per run of the dragon's weld, topology and bucket
+/// counts, and five `mremap` calls (`strace`), 2–3 ms of the kernel
+/// zeroing pages (`RECYCLE=1 cargo run --release --example stage_probe
+/// -- buckets`: 14 faults a run before, none after, the runs' median
+/// 29.7–30.2 → 27.5–28.4 ms); and a batch of six copies of the dragon,
+/// one job, one thread, faulted in 140 MiB of fresh anonymous memory
+/// before, 60–65 after (`benches/fresh_pages.py`). Blocks that touch were mostly one mapping once (a block
+/// and the tail cut off it); two mappings side by side are joined too,
+/// and what `mremap` then cannot move as one is copied instead (see
+/// [`HugePageAlloc`]'s `realloc`).
 #[cfg(target_os = "linux")]
-fn keep(p: *mut u8, span: usize) -> bool {
+fn keep(p: *mut u8, span: usize) -> Option<(*mut u8, usize)> {
     if KEEPERS.load(std::sync::atomic::Ordering::Relaxed) == 0 {
-        return false;
+        return Some((p, span));
     }
     let Ok(mut cache) = CACHE.lock() else {
-        return false;
+        return Some((p, span));
     };
+    // Kept blocks never touch (each was joined when kept), so at most one
+    // ends where this one starts and one starts where it ends.
+    let (lo, hi) = (p as usize, p as usize + span);
+    let before = cache.iter().position(|c| c.1 > 0 && c.0 + c.1 == lo);
+    let after = cache.iter().position(|c| c.1 > 0 && c.0 == hi);
+    let start = before.map_or(lo, |i| cache[i].0);
+    let end = after.map_or(hi, |i| cache[i].0 + cache[i].1);
     let held: usize = cache.iter().map(|c| c.1).sum();
+    // The neighbours' bytes are counted in `held` already.
     if held + span > CACHE_BYTES {
-        return false;
+        return Some((p, span));
+    }
+    for i in before.into_iter().chain(after) {
+        cache[i] = (0, 0);
     }
     match cache.iter_mut().find(|c| c.1 == 0) {
         Some(slot) => {
-            *slot = (p as usize, span);
-            true
+            *slot = (start, end - start);
+            None
         }
-        None => false,
+        None => Some((p, span)),
     }
 }
 
@@ -253,7 +282,7 @@ fn keep(p: *mut u8, span: usize) -> bool {
 /// `p..p + span` must be a mapping this allocator owns and nobody uses.
 #[cfg(target_os = "linux")]
 unsafe fn keep_or_unmap(p: *mut u8, span: usize) {
-    if !keep(p, span) {
+    if let Some((p, span)) = keep(p, span) {
         // SAFETY: the caller's contract.
         unsafe { sys::unmap(p, span) }
     }
@@ -642,7 +671,22 @@ unsafe impl GlobalAlloc for HugePageAlloc {
                     ptr
                 } else {
                     // SAFETY: a mapping of exactly `old` bytes.
-                    unsafe { sys::remap(ptr, old, new) }
+                    let q = unsafe { sys::remap(ptr, old, new) };
+                    if !q.is_null() {
+                        return q;
+                    }
+                    // `mremap` moves one mapping only; a kept block joined
+                    // from two (see `keep`) is copied to a new block.
+                    let q = large_block(new, new_size, false);
+                    if !q.is_null() {
+                        // SAFETY: both blocks are valid for the old size
+                        // and distinct; the old one is ours to free.
+                        unsafe {
+                            std::ptr::copy_nonoverlapping(ptr, q, layout.size());
+                            keep_or_unmap(ptr, old);
+                        }
+                    }
+                    q
                 }
             }
             // SAFETY: the caller's contract.
@@ -908,19 +952,117 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             assert_eq!(cached(), (1, span(big)));
             let (p, s) = take(0).unwrap();
             sys::unmap(p, s);
-            let blocks: Vec<*mut u8> = (0..CACHE_SLOTS + 2)
-                .map(|_| a.alloc(lay(HUGE_MIN)))
-                .collect();
-            for &p in &blocks {
-                a.dealloc(p, lay(HUGE_MIN));
-            }
-            assert_eq!(cached(), (CACHE_SLOTS, CACHE_SLOTS * HUGE_MIN));
         }
+        // Slots: every other huge page of one mapping, so that no two of
+        // the freed blocks touch (touching blocks are joined into one).
+        let pieces = 2 * (CACHE_SLOTS + 2);
+        let region = sys::map(pieces * HUGE_MIN);
+        assert!(!region.is_null());
+        unsafe {
+            for i in (0..pieces).step_by(2) {
+                keep_or_unmap(region.add(i * HUGE_MIN), HUGE_MIN);
+            }
+        }
+        assert_eq!(cached(), (CACHE_SLOTS, CACHE_SLOTS * HUGE_MIN));
         // Guards nest: the kept blocks go when the last one drops.
         let inner = KeepFreed::new();
         drop(outer);
         assert_eq!(cached(), (CACHE_SLOTS, CACHE_SLOTS * HUGE_MIN));
         drop(inner);
+        assert_eq!(cached(), (0, 0));
+        unsafe {
+            for i in (1..pieces).step_by(2) {
+                sys::unmap(region.add(i * HUGE_MIN), HUGE_MIN);
+            }
+        }
+    }
+
+    /// Freed blocks that touch are kept as one: a block cut from a kept one
+    /// comes back whole once freed, so freeing and asking again for the
+    /// same sizes neither maps nor grows anything (before the joining, the
+    /// pieces were grown back with fresh pages); pieces of a mapping freed
+    /// out of order join up from both sides; a join that would pass
+    /// [`CACHE_BYTES`] leaves the cache as it was. A block joined from two
+    /// mappings that `mremap` cannot grow as one is copied instead. Caught:
+    /// no joining (the counts), the join that passes the limit dropping
+    /// its neighbours, and the grow without the copy (a null pointer).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn freed_blocks_that_touch_are_kept_as_one() {
+        let _serial = SERIAL.lock().unwrap();
+        let a = HugePageAlloc;
+        let lay = |size| Layout::from_size_align(size, 8).unwrap();
+        let keep = KeepFreed::new();
+        unsafe {
+            let p = a.alloc(lay(5 * HUGE_MIN));
+            a.dealloc(p, lay(5 * HUGE_MIN));
+            for size in [2 * HUGE_MIN, 3 * HUGE_MIN, HUGE_MIN + 1] {
+                let q = a.alloc(lay(size));
+                assert_eq!(q, p, "the kept block is cut, not mapped afresh");
+                a.dealloc(q, lay(size));
+                assert_eq!(
+                    cached(),
+                    (1, 5 * HUGE_MIN),
+                    "{size}: the cut came back whole"
+                );
+            }
+            let (q, s) = take(0).unwrap();
+            sys::unmap(q, s);
+
+            // Five pieces of one mapping, freed 0, 2, 1, 4, 3.
+            let r = sys::map(5 * HUGE_MIN);
+            let piece = |i: usize| r.add(i * HUGE_MIN);
+            keep_or_unmap(piece(0), HUGE_MIN);
+            keep_or_unmap(piece(2), HUGE_MIN);
+            assert_eq!(cached(), (2, 2 * HUGE_MIN));
+            keep_or_unmap(piece(1), HUGE_MIN);
+            assert_eq!(cached(), (1, 3 * HUGE_MIN));
+            keep_or_unmap(piece(4), HUGE_MIN);
+            assert_eq!(cached(), (2, 4 * HUGE_MIN));
+            keep_or_unmap(piece(3), HUGE_MIN);
+            assert_eq!(cached(), (1, 5 * HUGE_MIN));
+            assert_eq!(take(0), Some((r, 5 * HUGE_MIN)));
+
+            // Over the limit: the neighbour stays kept, the block goes.
+            let big = CACHE_BYTES - HUGE_MIN;
+            let r = sys::map(big + 2 * HUGE_MIN);
+            keep_or_unmap(r, big);
+            keep_or_unmap(r.add(big), 2 * HUGE_MIN);
+            assert_eq!(cached(), (1, big));
+            assert_eq!(take(0), Some((r, big)));
+            sys::unmap(r, big);
+
+            // Two mappings side by side, as the kernel may place them: here
+            // one mapping split in two by a different hint on each half.
+            let r = sys::map(4 * HUGE_MIN);
+            libc::madvise(r.cast(), 2 * HUGE_MIN, libc::MADV_NOHUGEPAGE);
+            libc::madvise(
+                r.add(2 * HUGE_MIN).cast(),
+                2 * HUGE_MIN,
+                libc::MADV_HUGEPAGE,
+            );
+            keep_or_unmap(r, 2 * HUGE_MIN);
+            keep_or_unmap(r.add(2 * HUGE_MIN), 2 * HUGE_MIN);
+            assert_eq!(cached(), (1, 4 * HUGE_MIN));
+            let q = a.alloc(lay(4 * HUGE_MIN));
+            assert_eq!(q, r);
+            let bytes = std::slice::from_raw_parts_mut(q, 4 * HUGE_MIN);
+            for (i, b) in bytes.iter_mut().enumerate() {
+                *b = i as u8;
+            }
+            let g = a.realloc(q, lay(4 * HUGE_MIN), 9 * HUGE_MIN);
+            assert!(!g.is_null(), "grown across two mappings");
+            let grown = std::slice::from_raw_parts_mut(g, 9 * HUGE_MIN);
+            assert!(
+                grown[..4 * HUGE_MIN]
+                    .iter()
+                    .enumerate()
+                    .all(|(i, &b)| b == i as u8)
+            );
+            grown[9 * HUGE_MIN - 1] = 7;
+            a.dealloc(g, lay(9 * HUGE_MIN));
+        }
+        drop(keep);
         assert_eq!(cached(), (0, 0));
     }
 

@@ -99,3 +99,15 @@ pub fn welded_in_sorted_words(sorted: &[u128], welded: &[[f32; 3]]) -> bool {
     }
     next.next().is_none()
 }
+
+/// meshoptimizer's adjacency index buffer from an unwelded soup (it matches
+/// positions itself): the topology peer of the stages bench.
+pub fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
+    let adapter = meshopt::VertexDataAdapter::new(
+        meshopt::typed_to_bytes(positions),
+        std::mem::size_of::<[f32; 3]>(),
+        0,
+    )
+    .unwrap();
+    meshopt::generate_adjacency_indices(indices, &adapter)
+}
