@@ -486,8 +486,9 @@ fn build(path: &Path) {
     );
 }
 
-/// Weld, topology with its statistics and the bucket counts, as the stages
-/// bench's `weld+topology+layout/ours_buckets` runs them, then its peer,
+/// Weld, topology, the bucket counts and the edge statistics from them, as
+/// the stages bench's `weld+topology+layout/ours_buckets` runs them (and a
+/// build: `Plan::edge_stats`), then its peer,
 /// meshoptimizer's adjacency from the same soup: 30 runs of ours and 10 of
 /// the peer, the fastest and median times and the median number of page
 /// faults per run (`getrusage`'s minor faults: one per huge page or small
@@ -529,8 +530,8 @@ fn buckets(path: &Path) {
     runs("weld + topology + buckets", 30, &|| {
         let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
         let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
-        let stats = svpack::topology::edge_stats(&e);
         let plan = Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
+        let stats = plan.edge_stats();
         std::hint::black_box((w, e, stats, plan));
     });
     runs("meshoptimizer's adjacency", 10, &|| {
