@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Rebuilding in place against building fresh, for two svpack binaries.
 
-Usage: python3 benches/rebuild.py OLD NEW INPUT [COPIES] [ROUNDS]
+Usage: python3 benches/rebuild.py [--jobs J] OLD NEW INPUT [COPIES] [ROUNDS]
 
 Builds COPIES copies of INPUT (default 6) as one batch into an output
 directory, ROUNDS times (default 8) per binary, the binaries alternating
@@ -11,15 +11,21 @@ whole command:
   over   the same batch again over those outputs once they are written
          back (`sync` between), as a pipeline that rebuilds its assets
          finds them.
-Prints the fastest and the median of each, checks that both binaries'
-outputs are the same bytes and that no temp file is left beside them
-(exit status 1 otherwise).
+Prints the fastest and the median of each, and of the fresh batches the
+median number of page faults (the process's minor faults, `wait4`: one
+per huge page or small page faulted in, so fresh memory shows here) and
+the largest peak memory; checks that both binaries' outputs are the same
+bytes and that no temp file is left beside them (exit status 1
+otherwise). With --jobs J the batches run with `--jobs J --threads J`
+(otherwise the defaults: one per core).
 
 Why: on a filesystem mounted with `discard` (this machine's ext4) removing
 a written-back output waits for the device to discard its blocks (27 ms
 for the dragon's 120 MiB, `cargo run --release --example stage_probe --
 replace DIR`), and a build that replaces an output removes
-the old one (benches/ROUNDS.md, Twentieth round).
+the old one (benches/ROUNDS.md, Twentieth round); and a batch keeps the
+large blocks one build frees for the next (`alloc::KeepFreed`), which a
+single build cannot show (Twenty-seventh round).
 """
 import filecmp
 import os
@@ -31,19 +37,31 @@ import tempfile
 import time
 
 
-def run(binary, inputs, out):
+def run(binary, inputs, out, jobs):
+    """Wall ms, minor faults and peak memory (MiB) of one command."""
+    extra = ["--jobs", jobs, "--threads", jobs] if jobs else []
     start = time.perf_counter()
-    subprocess.run([binary, "build", *inputs, "-o", out, "--quiet"],
-                   check=True, stdout=subprocess.DEVNULL)
-    return (time.perf_counter() - start) * 1e3
+    p = subprocess.Popen([binary, "build", *inputs, "-o", out, "--quiet", *extra],
+                         stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(p.pid, 0)
+    wall = (time.perf_counter() - start) * 1e3
+    if status != 0:
+        sys.exit(f"{binary} failed (status {status})")
+    return wall, usage.ru_minflt, usage.ru_maxrss / 1024
 
 
 def main():
-    if len(sys.argv) < 4:
+    args = sys.argv[1:]
+    jobs = None
+    if "--jobs" in args:
+        i = args.index("--jobs")
+        jobs = args[i + 1]
+        del args[i:i + 2]
+    if len(args) < 3:
         sys.exit(__doc__)
-    old, new, src = sys.argv[1:4]
-    copies = int(sys.argv[4]) if len(sys.argv) > 4 else 6
-    rounds = int(sys.argv[5]) if len(sys.argv) > 5 else 8
+    old, new, src = args[:3]
+    copies = int(args[3]) if len(args) > 3 else 6
+    rounds = int(args[4]) if len(args) > 4 else 8
     work = tempfile.mkdtemp(prefix="svpack-rebuild-", dir=".")
     ok = True
     try:
@@ -54,6 +72,8 @@ def main():
             shutil.copyfile(src, path)
             inputs.append(path)
         times = {b: {"fresh": [], "over": []} for b in ("old", "new")}
+        faults = {b: [] for b in ("old", "new")}
+        peak = {b: 0.0 for b in ("old", "new")}
         # One input builds into a file, several into a directory.
         outs = {b: os.path.join(work, f"out-{b}" + ("" if copies > 1 else ".svpk"))
                 for b in ("old", "new")}
@@ -66,9 +86,12 @@ def main():
                 if os.path.isfile(outs[name]):
                     os.remove(outs[name])
                 subprocess.run(["sync"], check=True)
-                times[name]["fresh"].append(run(binary, inputs, outs[name]))
+                wall, minflt, rss = run(binary, inputs, outs[name], jobs)
+                times[name]["fresh"].append(wall)
+                faults[name].append(minflt)
+                peak[name] = max(peak[name], rss)
                 subprocess.run(["sync"], check=True)
-                times[name]["over"].append(run(binary, inputs, outs[name]))
+                times[name]["over"].append(run(binary, inputs, outs[name], jobs)[0])
                 beside = outs[name] if copies > 1 else work
                 left = [f for f in os.listdir(beside) if f.startswith(".svpack-")]
                 if left:
@@ -82,12 +105,14 @@ def main():
                 print(f"outputs differ: {a} {b}")
                 ok = False
         print(f"{copies} copies of {src}, {rounds} rounds, wall ms, fastest / median")
-        print("| binary | fresh | over the written-back outputs |")
-        print("|---|---:|---:|")
+        print("| binary | fresh | over the written-back outputs "
+              "| page faults (fresh, median) | peak memory (MiB) |")
+        print("|---|---:|---:|---:|---:|")
         for name in ("old", "new"):
             t = times[name]
             print(f"| {name} | {min(t['fresh']):.0f} / {statistics.median(t['fresh']):.0f} "
-                  f"| {min(t['over']):.0f} / {statistics.median(t['over']):.0f} |")
+                  f"| {min(t['over']):.0f} / {statistics.median(t['over']):.0f} "
+                  f"| {statistics.median(faults[name]):.0f} | {peak[name]:.1f} |")
     finally:
         shutil.rmtree(work, ignore_errors=True)
     sys.exit(0 if ok else 1)

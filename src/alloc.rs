@@ -239,7 +239,13 @@ static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
 /// -- buckets`: 14 faults a run before, none after, the runs' median
 /// 29.7–30.2 → 27.5–28.4 ms); and a batch of six copies of the dragon,
 /// one job, one thread, faulted in 140 MiB of fresh anonymous memory
-/// before, 60–65 after (`benches/fresh_pages.py`). Blocks that touch were mostly one mapping once (a block
+/// before, 60–65 after (`benches/fresh_pages.py`). The price is in a
+/// batch's peak memory: the pieces used to be unmapped for want of a
+/// slot, or grown into address space never touched, and joined they stay
+/// resident: 73 → 85 MiB with one job, 147 → 169 MiB with two
+/// (`python3 benches/rebuild.py --jobs J OLD NEW dragon.glb 6 8`, whose
+/// wall times moved within the noise, and 8% faster with two jobs). A
+/// single build's peak is unchanged (54 MiB). Blocks that touch were mostly one mapping once (a block
 /// and the tail cut off it); two mappings side by side are joined too,
 /// and what `mremap` then cannot move as one is copied instead (see
 /// [`HugePageAlloc`]'s `realloc`).
