@@ -232,23 +232,26 @@ static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
 /// on its own, and a block too short is grown with `mremap`, whose new
 /// tail is fresh memory. Without joining, a loop that frees and asks again
 /// for the same buffers cut its blocks into ever smaller pieces, filled the
-/// slots with them and grew the pieces back with fresh pages: 16 huge
+/// slots with them and grew the pieces back with fresh pages: 14–16 huge
 /// pages faulted in per run of the dragon's weld, topology and bucket
 /// counts, and five `mremap` calls (`strace`), 2–3 ms of the kernel
 /// zeroing pages (`RECYCLE=1 cargo run --release --example stage_probe
 /// -- buckets`: 14 faults a run before, none after, the runs' median
 /// 29.7–30.2 → 27.5–28.4 ms); and a batch of six copies of the dragon,
 /// one job, one thread, faulted in 140 MiB of fresh anonymous memory
-/// before, 60–65 after (`benches/fresh_pages.py`). The price is in a
-/// batch's peak memory: the pieces used to be unmapped for want of a
-/// slot, or grown into address space never touched, and joined they stay
-/// resident: 73 → 85 MiB with one job, 147 → 169 MiB with two
-/// (`python3 benches/rebuild.py --jobs J OLD NEW dragon.glb 6 8`, whose
-/// wall times moved within the noise, and 8% faster with two jobs). A
-/// single build's peak is unchanged (54 MiB). Blocks that touch were mostly one mapping once (a block
-/// and the tail cut off it); two mappings side by side are joined too,
-/// and what `mremap` then cannot move as one is copied instead (see
-/// [`HugePageAlloc`]'s `realloc`).
+/// before, 60–65 after (`benches/fresh_pages.py`).
+///
+/// The price is in a batch's peak memory: the pieces used to be unmapped
+/// for want of a slot, or grown into address space never touched, and
+/// joined they stay resident: 73 → 85 MiB with one job, 147 → 169 MiB
+/// with two (`python3 benches/rebuild.py --jobs J OLD NEW dragon.glb 6
+/// 8`, whose wall times moved within the noise with one job and were 8%
+/// shorter with two). A single build's peak is unchanged (54 MiB).
+///
+/// Blocks that touch were mostly one mapping once (a block and the tail
+/// cut off it); two mappings side by side are joined too, and what
+/// `mremap` then cannot grow as one is copied instead ([`HugePageAlloc`]'s
+/// `realloc`) or left kept for a fresh block (`large_block`).
 #[cfg(target_os = "linux")]
 fn keep(p: *mut u8, span: usize) -> Option<(*mut u8, usize)> {
     if KEEPERS.load(std::sync::atomic::Ordering::Relaxed) == 0 {
@@ -331,8 +334,10 @@ fn large_block(span: usize, size: usize, zeroed: bool) -> *mut u8 {
         // SAFETY: as above.
         let q = unsafe { sys::remap(p, s, span) };
         if q.is_null() {
+            // A block joined from two mappings, which `mremap` cannot move
+            // as one (see `keep`): kept again, and a fresh block instead.
             // SAFETY: as above; the block is not handed out.
-            unsafe { sys::unmap(p, s) };
+            unsafe { keep_or_unmap(p, s) };
             return sys::map(span);
         }
         q
@@ -989,9 +994,11 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     /// pieces were grown back with fresh pages); pieces of a mapping freed
     /// out of order join up from both sides; a join that would pass
     /// [`CACHE_BYTES`] leaves the cache as it was. A block joined from two
-    /// mappings that `mremap` cannot grow as one is copied instead. Caught:
-    /// no joining (the counts), the join that passes the limit dropping
-    /// its neighbours, and the grow without the copy (a null pointer).
+    /// mappings, which `mremap` cannot grow as one, stays kept when a
+    /// larger block is asked for, and is copied when grown by `realloc`.
+    /// Caught: no joining (the counts), the join that passes the limit
+    /// dropping its neighbours, the block unmapped when it could not grow,
+    /// and the grow without the copy (a null pointer).
     #[cfg(target_os = "linux")]
     #[test]
     fn freed_blocks_that_touch_are_kept_as_one() {
@@ -1050,6 +1057,13 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             keep_or_unmap(r, 2 * HUGE_MIN);
             keep_or_unmap(r.add(2 * HUGE_MIN), 2 * HUGE_MIN);
             assert_eq!(cached(), (1, 4 * HUGE_MIN));
+            // Asked for more than it holds, the joined block stays kept
+            // and a fresh one is mapped (unmapped here directly, so that
+            // it cannot join the kept one).
+            let f = a.alloc(lay(6 * HUGE_MIN));
+            assert!(!f.is_null() && f != r);
+            assert_eq!(cached(), (1, 4 * HUGE_MIN), "the joined block is kept");
+            sys::unmap(f, 6 * HUGE_MIN);
             let q = a.alloc(lay(4 * HUGE_MIN));
             assert_eq!(q, r);
             let bytes = std::slice::from_raw_parts_mut(q, 4 * HUGE_MIN);
