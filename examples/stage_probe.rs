@@ -24,7 +24,11 @@
 //! commit: `passes` (`topology::build_edges_opposites_only_timed`, eleventh
 //! round), `weld` (`weld::weld_without_sources` under an
 //! `alloc::KeepFreed` guard, thirteenth round; its steps timed by
-//! `weld::weld_without_sources_timed`, twenty-third round) and `fill-write`
+//! `weld::weld_without_sources_timed`, twenty-third round), `buckets`
+//! (`weld::weld_without_sources` and `Plan::edge_stats`, fourteenth round;
+//! its before figures came from this file built with the twenty-sixth
+//! round's `src/alloc.rs`)
+//! and `fill-write`
 //! (`format::split_pieces`, fifteenth round; its before figures came from
 //! this file built with the old prefetch distance instead; and
 //! `layout::SoupCaps`, twenty-second round). Since the
