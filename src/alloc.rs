@@ -243,10 +243,13 @@ static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
 ///
 /// The price is in a batch's peak memory: the pieces used to be unmapped
 /// for want of a slot, or grown into address space never touched, and
-/// joined they stay resident: 73 → 85 MiB with one job, 147 → 169 MiB
-/// with two (`python3 benches/rebuild.py --jobs J OLD NEW dragon.glb 6
-/// 8`, whose wall times moved within the noise with one job and were 8%
-/// shorter with two). A single build's peak is unchanged (54 MiB).
+/// joined they stay resident: 73 → 81–85 MiB with one job, 147 →
+/// 163–169 MiB with two (`python3 benches/rebuild.py --jobs J OLD NEW
+/// dragon.glb 6 8`, whose wall times moved within the noise with one job
+/// and were 8% shorter with two). A single build's peak is unchanged (54
+/// MiB). Bounding the cache by the most bytes ever live at once did not
+/// lower the batch's peak and gave back part of the fresh memory
+/// (benches/ROUNDS.md, Twenty-seventh round).
 ///
 /// Blocks that touch were mostly one mapping once (a block and the tail
 /// cut off it); two mappings side by side are joined too, and what
