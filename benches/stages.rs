@@ -159,20 +159,6 @@ fn payload(m: &Mesh) -> MeshPayload<'_> {
     }
 }
 
-/// What an uncompressed build does before its write stage (which fills the
-/// records straight into the file): weld, topology, the bucket counts and
-/// the edge statistics, which the build takes from the plan's histogram
-/// (`Plan::edge_stats`; until the twenty-seventh round this bench also
-/// ran `topology::edge_stats`, a pass over the edges the build has not
-/// made since the fourteenth round).
-fn ours_buckets(soup: &Soup) -> (Welded, Edges, topology::EdgeStats, layout::Plan) {
-    let w = weld::weld_without_sources(&soup.positions, &soup.indices);
-    let e = topology::build_edges_opposites_only(&w.triangles, w.positions.len());
-    let plan = layout::Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
-    let stats = plan.edge_stats();
-    (w, e, stats, plan)
-}
-
 fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     let n = &m.name;
 
@@ -399,7 +385,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
         b.iter(|| build_soup(black_box(&m.soup), DEFAULT_MAX_MULT))
     });
     g.bench_function(format!("ours_buckets/{n}"), |b| {
-        b.iter(|| ours_buckets(black_box(&m.soup)))
+        b.iter(|| peers::ours_buckets(black_box(&m.soup)))
     });
     // The same under an `alloc::KeepFreed` guard held across the
     // iterations, so that each run gets the blocks the run before freed,
@@ -411,7 +397,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     // `stage_probe -- buckets`, twenty-seventh round).
     g.bench_function(format!("ours_buckets_kept/{n}"), |b| {
         let _keep = svpack::alloc::KeepFreed::new();
-        b.iter(|| ours_buckets(black_box(&m.soup)))
+        b.iter(|| peers::ours_buckets(black_box(&m.soup)))
     });
     g.bench_function(format!("meshopt_adjacency/{n}"), |b| {
         b.iter(|| {

@@ -503,7 +503,6 @@ fn build(path: &Path) {
 /// The peer's C++ buffers come from glibc's malloc, which serves them
 /// from memory earlier runs freed, but for those above its mmap threshold.
 fn buckets(path: &Path) {
-    use svpack::layout::{DEFAULT_MAX_MULT, Plan};
     let soup = svpack::load::load(path).unwrap();
     let faults = || {
         // SAFETY: `getrusage` writes the struct it is given.
@@ -532,11 +531,7 @@ fn buckets(path: &Path) {
         );
     };
     runs("weld + topology + buckets", 30, &|| {
-        let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
-        let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
-        let plan = Plan::new(&e, w.triangle_count(), DEFAULT_MAX_MULT);
-        let stats = plan.edge_stats();
-        std::hint::black_box((w, e, stats, plan));
+        std::hint::black_box(peers::ours_buckets(&soup));
     });
     runs("meshoptimizer's adjacency", 10, &|| {
         std::hint::black_box(peers::meshopt_adjacency(&soup.positions, &soup.indices));

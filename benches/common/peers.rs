@@ -1,7 +1,9 @@
 //! The parsers our loaders sit on, called alone, as the peers of
 //! `svpack::load::load` in the stages and load-overhead benchmarks: what a
 //! loader that only wanted positions and indices would have to run anyway;
-//! and the standard library's sort as the peer of the weld's.
+//! the standard library's sort as the peer of the weld's; and
+//! meshoptimizer's adjacency with the part of our build it is measured
+//! against (`ours_buckets`), for the stages bench and `stage_probe`.
 
 use std::path::Path;
 
@@ -110,4 +112,25 @@ pub fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
     )
     .unwrap();
     meshopt::generate_adjacency_indices(indices, &adapter)
+}
+
+/// What an uncompressed build does before its write stage (which fills the
+/// records straight into the file): weld, topology, the bucket counts and
+/// the edge statistics, which the build takes from the plan's histogram
+/// (`Plan::edge_stats`; until the twenty-seventh round the stages bench also
+/// ran `topology::edge_stats`, a pass over the edges the build has not
+/// made since the fourteenth round).
+pub fn ours_buckets(
+    soup: &svpack::load::Soup,
+) -> (
+    svpack::weld::Welded,
+    svpack::topology::Edges,
+    svpack::topology::EdgeStats,
+    svpack::layout::Plan,
+) {
+    let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
+    let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
+    let plan = svpack::layout::Plan::new(&e, w.triangle_count(), svpack::layout::DEFAULT_MAX_MULT);
+    let stats = plan.edge_stats();
+    (w, e, stats, plan)
 }
