@@ -791,3 +791,35 @@ fn bijection_counts_what_sorting_every_triple_counts() {
         "{damaged} damaged, {firsts} compared"
     );
 }
+
+/// Lights evaluated in groups (`evaluate_many_into`: the caps of each group
+/// of `LIGHT_GROUP` lights in one pass, the sides from the group's table)
+/// give every light what `evaluate` gives it, for every strategy (the
+/// others evaluate light by light), with the buffers reused for a second
+/// set of lights; nine lights, so that one is left after the two groups.
+#[test]
+fn lights_in_groups_equal_lights_one_by_one() {
+    use svpack::verify::{Evaluation, choose_lights, evaluate_many_into};
+    let tmp = tempfile::tempdir().unwrap();
+    for input in hard_cases_and(tmp.path(), &["chair_model.obj"]) {
+        let out = tmp.path().join("x.svpk");
+        svpack::build::build_file(&input, &out, &Default::default()).unwrap();
+        let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+        let lights = choose_lights(&d, 18, 9);
+        for s in Strategy::ALL {
+            let mut evs = vec![Evaluation::default(); 9];
+            for set in [&lights[..9], &lights[9..]] {
+                evaluate_many_into(&d, set, s, &mut evs);
+                for (&l, ev) in set.iter().zip(&evs) {
+                    let one = evaluate(&d, l, s);
+                    assert!(ev.caps == one.caps, "{} {s:?} {l:?}: caps", input.display());
+                    assert!(
+                        ev.sides == one.sides,
+                        "{} {s:?} {l:?}: sides",
+                        input.display()
+                    );
+                }
+            }
+        }
+    }
+}
