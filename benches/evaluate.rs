@@ -5,7 +5,8 @@
 //! benches/fetch_dragon.sh has fetched it) and a generated sphere.
 //!
 //! Also the shared evaluator `verify` uses (triangles once, sides as sums of
-//! their signs), per side record.
+//! their signs), per side record, and the same for four lights at once
+//! (`caps+sides/reference_shared_4_lights`, per light and side record).
 //!
 //! `reference` is the vectorised kernel (`svpack::evaluate_simd`, what
 //! `Strategy::Reference` runs); `reference_scalar` is the scalar, branching
@@ -36,6 +37,18 @@ use sphere::sphere_obj;
 
 /// Signature of `side_multiplicities_shared` and its scalar peer.
 type SharedFn = fn(Strategy, usize, &[f32], &[u32], &[i8], &[i8], [f32; 4], &mut [i8]);
+
+/// The group of lights of the four-light benchmarks: `light` and three
+/// others around the model (one directional), as `stage_probe -- evaluate`
+/// has them.
+fn four_lights(light: [f32; 4]) -> [[f32; 4]; 4] {
+    [
+        light,
+        [-3.0, 1.5, 2.0, 1.0],
+        [0.3, -1.0, 0.2, 0.0],
+        [1.0, 9.0, -4.0, 1.0],
+    ]
+}
 
 /// `shared` (the reference strategy) over one decoded bucket.
 fn shared_bucket(
@@ -206,6 +219,20 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
             svpack::evaluate_simd::disable_avx512(false);
         });
     }
+    // Four lights at once (`evaluate_many_into`: the caps of the group in
+    // one pass, the sides from the group's table), per light and side
+    // record: the element count is four lights' records.
+    g.throughput(Throughput::Elements(4 * records as u64));
+    g.bench_function("caps+sides/reference_shared_4_lights", |b| {
+        let lights = four_lights(light);
+        let mut evs = vec![svpack::verify::Evaluation::default(); lights.len()];
+        pool.install(|| {
+            b.iter(|| {
+                svpack::verify::evaluate_many_into(&d, &lights, Strategy::Reference, &mut evs)
+            })
+        });
+    });
+    g.throughput(Throughput::Elements(records as u64));
     // The peer of the lines above: the same kernels with the triangles in
     // input order (the evaluator before `evaluate_ordered`), buffers reused
     // as above: the caps from ids, then each slot's sign read from the

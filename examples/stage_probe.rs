@@ -209,7 +209,9 @@ fn passes(path: &Path) {
 /// rounds of 5 runs each, so that all see the same phases of this machine
 /// (criterion runs one after the other); prints the fastest and the median
 /// round per run, in ms, and each choice's caps + sides as a multiple of
-/// `auto`'s.
+/// `auto`'s. Then, in the same rounds, four lights at once
+/// (`evaluate_many_into`, and its caps alone, `cap_signs_many`) against the
+/// same four one at a time, per light.
 fn evaluate(path: &Path) {
     use svpack::evaluate_simd::{disable_avx512, prefer_gather_caps};
     let dir = tempfile::tempdir().unwrap();
@@ -237,6 +239,20 @@ fn evaluate(path: &Path) {
     let in_input_order = svpack::evaluate_indexed::IndexedCaps::new(&d.positions, &d.caps)
         .expect("the table that `decode` accepted");
     let mut times = vec![(Vec::new(), Vec::new()); choices.len()];
+    // The crate's kernels on four lights at once (`evaluate_many_into`),
+    // against the same four one at a time into one reused evaluation (as
+    // `verify` runs its lights); per light.
+    let four = [
+        light,
+        [-3.0, 1.5, 2.0, 1.0],
+        [0.3, -1.0, 0.2, 0.0],
+        [1.0, 9.0, -4.0, 1.0],
+    ];
+    let mut evs = vec![svpack::verify::Evaluation::default(); four.len()];
+    let mut one_by_one = svpack::verify::Evaluation::default();
+    let (mut grouped, mut alone) = (Vec::new(), Vec::new());
+    let (mut caps_grouped, mut caps_alone) = (Vec::new(), Vec::new());
+    let mut caps4 = vec![vec![0i8; ix.len()]; four.len()];
     let mut signs = vec![0i8; ix.len()];
     let mut ev = svpack::verify::Evaluation::default();
     let mut sides: Vec<Vec<i8>> = d.buckets.iter().map(|b| vec![0; b.records()]).collect();
@@ -274,6 +290,38 @@ fn evaluate(path: &Path) {
             }
             both.push(per_run(t));
         }
+        let t = Instant::now();
+        for _ in 0..5 {
+            let mut out: Vec<&mut [i8]> = caps4.iter_mut().map(|c| &mut c[..]).collect();
+            ix.cap_signs_many(&four, &mut out);
+        }
+        caps_grouped.push(per_run(t) / four.len() as f64);
+        let t = Instant::now();
+        for _ in 0..5 {
+            for (&l, c) in four.iter().zip(&mut caps4) {
+                ix.cap_signs(l, c);
+            }
+        }
+        caps_alone.push(per_run(t) / four.len() as f64);
+        let t = Instant::now();
+        for _ in 0..5 {
+            svpack::verify::evaluate_many_into(&d, &four, strategy, &mut evs);
+        }
+        grouped.push(per_run(t) / four.len() as f64);
+        let t = Instant::now();
+        for _ in 0..5 {
+            for &l in &four {
+                svpack::verify::evaluate_into(&d, l, strategy, &mut one_by_one);
+            }
+        }
+        alone.push(per_run(t) / four.len() as f64);
+    }
+    for (&l, ev) in four.iter().zip(&evs) {
+        svpack::verify::evaluate_into(&d, l, strategy, &mut one_by_one);
+        assert!(
+            ev.caps == one_by_one.caps && ev.sides == one_by_one.sides,
+            "four lights at once differ from one at a time"
+        );
     }
     assert!(
         signs == ev.caps && sides == ev.sides,
@@ -298,6 +346,23 @@ fn evaluate(path: &Path) {
             bm / auto.1
         );
     }
+    let (cgf, cgm) = fastest_median(&mut caps_grouped);
+    let (caf, cam) = fastest_median(&mut caps_alone);
+    println!(
+        "four lights, caps alone: at once {cgf:.3} / {cgm:.3} ms per light, one at a time {caf:.3} / {cam:.3} ms"
+    );
+    let (gf, gm) = fastest_median(&mut grouped);
+    let (af, am) = fastest_median(&mut alone);
+    let ns = |ms: f64| ms * 1e6 / records as f64;
+    println!(
+        "four lights: at once {gf:.3} / {gm:.3} ms per light ({:.2} / {:.2} ns per side record), one at a time {af:.3} / {am:.3} ms ({:.2} / {:.2} ns; {:.2} / {:.2} × at once)",
+        ns(gf),
+        ns(gm),
+        ns(af),
+        ns(am),
+        af / gf,
+        am / gm
+    );
 }
 
 /// Where `fill-write`'s caps come from.
