@@ -504,11 +504,25 @@ fn ordered_evaluation_of_a_damaged_file_equals_per_record_evaluation() {
         .count();
     let left: usize = o.leftovers(0).iter().map(|r| r.len()).sum();
     assert_eq!(left, with_unknown * block + b.records() % block);
-    for light in choose_lights(&d, 8, 3) {
+    let lights = choose_lights(&d, 8, 3);
+    // The same lights in groups of four (`evaluate_many_into`), whose
+    // leftovers (the blocks with a slot that names no triangle, evaluated
+    // on the records with each light) go through the same loop.
+    let mut evs = vec![svpack::verify::Evaluation::default(); lights.len()];
+    svpack::verify::evaluate_many_into(&d, &lights, Strategy::Reference, &mut evs);
+    for (&light, many) in lights.iter().zip(&evs) {
         let got = evaluate(&d, light, Strategy::Reference);
         let want = evaluate_per_record(&d, light, Strategy::Reference);
         assert!(got.caps == want.caps, "caps differ for {light:?}");
         assert!(got.sides == want.sides, "sides differ for {light:?}");
+        assert!(
+            many.caps == want.caps,
+            "caps of a group differ for {light:?}"
+        );
+        assert!(
+            many.sides == want.sides,
+            "sides of a group differ for {light:?}"
+        );
     }
 }
 
