@@ -25,8 +25,9 @@
 //! Several lights ([`IndexedCaps::cap_signs_many`],
 //! [`IndexedCaps::cap_sign_pairs`]) share each block's gathers and
 //! transposes, most of the one-light kernel's instructions: on the dragon,
-//! about 0.6 ms per light in groups of four against 1.2–1.5 ms alone (one
-//! thread).
+//! 0.61–0.64 ms per light in groups of four against 1.11–1.26 ms one at a
+//! time (one thread, `cargo run --release --example stage_probe --
+//! evaluate target/dragon/dragon.glb`, four runs).
 
 use crate::evaluate_simd::{Corner, LANES, sorted_sign_nb, sorted_sign_off_corners};
 use crate::multiplicity::{Light, lex_less};

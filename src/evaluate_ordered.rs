@@ -55,12 +55,12 @@
 //! their signs as one `u32` per pair entry, a byte per light, biased by one
 //! so that a record's slots add as plain integers without carries; the
 //! sides read one entry per slot for the four lights; the signs go to input
-//! order as one `u32` per triangle. On the dragon, one thread: 1.21–1.31 ns
-//! per side record per light at the fastest, against 2.5–2.9 ns for the
+//! order as one `u32` per triangle. On the dragon, one thread: 1.22–1.27 ns
+//! per side record per light at the fastest, against 2.43–2.55 ns for the
 //! same lights one at a time (`cargo run --release --example stage_probe
-//! -- evaluate target/dragon/dragon.glb`, its `four lights` line; local
-//! probes put the caps kernel at 0.6 ms per light, against 1.2–1.5 ms
-//! alone, and the sides at 0.5 ms against 0.85 ms).
+//! -- evaluate target/dragon/dragon.glb`, its `four lights` lines, four
+//! runs; the caps alone 0.61–0.64 against 1.11–1.26 ms per light; a local
+//! probe put the sides at 0.5 ms per light against 0.85 ms).
 
 use crate::evaluate_indexed::{IndexedCaps, LIGHT_GROUP};
 use crate::multiplicity::Light;
@@ -651,13 +651,17 @@ mod tests {
         left
     }
 
-    #[test]
-    fn equals_the_input_order_path_bit_for_bit() {
+    /// A bucket as `new` takes it: slots per record, triangles, parities.
+    type Bucket = (usize, Vec<u32>, Vec<i8>);
+
+    /// The tests' mesh: 5000 triangles over a table of 3000 points, and
+    /// buckets of slot counts 1–4 (specialised) and 6 (the general loop),
+    /// record counts that leave tails, one bucket (k = 3) with unknown
+    /// slots; `seed` picks the triangles, `seed + 1..` the buckets.
+    fn mesh(seed: u64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<Bucket>) {
         let positions = table(3000);
-        let caps = triangles(5000, positions.len(), 11);
-        // Slot counts 1–4 (specialised) and 6 (the general loop); record
-        // counts that leave tails; one bucket with unknown slots.
-        let buckets: Vec<(usize, Vec<u32>, Vec<i8>)> = [
+        let caps = triangles(5000, positions.len(), seed);
+        let buckets = [
             (1, 1003, 0),
             (2, 2500, 0),
             (3, 800, 97),
@@ -667,15 +671,26 @@ mod tests {
         .iter()
         .enumerate()
         .map(|(s, &(k, records, unknown))| {
-            let (tri, parity) = bucket(k, records, caps.len(), unknown, 100 + s as u64);
+            let (tri, parity) = bucket(k, records, caps.len(), unknown, seed + 1 + s as u64);
             (k, tri, parity)
         })
         .collect();
+        (positions, caps, buckets)
+    }
+
+    /// [`OrderedEvaluation::new`] over `buckets`.
+    fn ordered(positions: &[[f32; 3]], caps: &[[u32; 3]], buckets: &[Bucket]) -> OrderedEvaluation {
         let slots: Vec<Slots> = buckets
             .iter()
             .map(|(k, t, p)| (*k, &t[..], &p[..]))
             .collect();
-        let o = OrderedEvaluation::new(&positions, &caps, &slots).unwrap();
+        OrderedEvaluation::new(positions, caps, &slots).unwrap()
+    }
+
+    #[test]
+    fn equals_the_input_order_path_bit_for_bit() {
+        let (positions, caps, buckets) = mesh(11);
+        let o = ordered(&positions, &caps, &buckets);
         let on_corner = {
             let p = positions[caps[17][1] as usize];
             [p[0], p[1], p[2], 1.0]
@@ -712,34 +727,13 @@ mod tests {
     /// loop); a light on a corner and a directional one; one thread and two.
     #[test]
     fn a_group_of_lights_equals_one_light_at_a_time() {
-        let positions = table(3000);
-        let caps = triangles(5000, positions.len(), 13);
-        let buckets: Vec<(usize, Vec<u32>, Vec<i8>)> = [
-            (1, 1003, 0),
-            (2, 2500, 0),
-            (3, 800, 97),
-            (4, 161, 0),
-            (6, 90, 0),
-        ]
-        .iter()
-        .enumerate()
-        .map(|(s, &(k, records, unknown))| {
-            let (tri, parity) = bucket(k, records, caps.len(), unknown, 200 + s as u64);
-            (k, tri, parity)
-        })
-        .chain(std::iter::once({
-            // 130 slots naming one triangle each record, all even: sums
-            // of ±130, which wrap in an i8 as the shader's would.
-            let tri: Vec<u32> = (0..40u32).flat_map(|r| [r * 7; 130]).collect();
-            let parity = vec![1i8; tri.len()];
-            (130, tri, parity)
-        }))
-        .collect();
-        let slots: Vec<Slots> = buckets
-            .iter()
-            .map(|(k, t, p)| (*k, &t[..], &p[..]))
-            .collect();
-        let o = OrderedEvaluation::new(&positions, &caps, &slots).unwrap();
+        let (positions, caps, mut buckets) = mesh(13);
+        // 130 slots naming one triangle each record, all even: sums of
+        // ±130, which wrap in an i8 as the shader's would.
+        let tri: Vec<u32> = (0..40u32).flat_map(|r| [r * 7; 130]).collect();
+        let parity = vec![1i8; tri.len()];
+        buckets.push((130, tri, parity));
+        let o = ordered(&positions, &caps, &buckets);
         let p = positions[caps[40][2] as usize];
         let lights: [Light; LIGHT_GROUP] = [
             [3.0, 2.5, 4.0, 1.0],

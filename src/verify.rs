@@ -531,13 +531,14 @@ fn evaluate_ordered(d: &Decoded, o: &OrderedEvaluation, light: Light, ev: &mut E
 /// group, the other strategies, and files whose table `decode` declined,
 /// are evaluated light by light.
 ///
-/// On the dragon, one thread, about 1.2–1.3 ns per side record per light
-/// against 2.4–2.8 one light at a time (`cargo run --release --example
-/// stage_probe -- evaluate target/dragon/dragon.glb`; benches/ROUNDS.md,
-/// twenty-eighth round). `verify` evaluates its lights one by one: there
-/// the evaluation is 2–3% of a light's checks, and a group's four
-/// evaluations and its table held at once cost each worker about 17 MB
-/// on the dragon for no measurable gain.
+/// On the dragon, one thread, 1.22–1.27 ns per side record per light
+/// against 2.43–2.55 one light at a time (fastest of 40 rounds, `cargo run
+/// --release --example stage_probe -- evaluate target/dragon/dragon.glb`,
+/// four runs; benches/ROUNDS.md, twenty-eighth round). `verify` evaluates
+/// its lights one by one: there the evaluation is 2–3% of a light's
+/// checks, and in groups it measured the same time for 26 MiB more peak
+/// memory on the dragon (four evaluations and the group's table per
+/// worker).
 pub fn evaluate_many_into(
     d: &Decoded,
     lights: &[Light],
