@@ -213,8 +213,8 @@ impl OrderedEvaluation {
 
     /// [`OrderedEvaluation::cap_signs`] for a group of [`LIGHT_GROUP`]
     /// lights, light `i`'s signs into `out[i]` in input order: computed in
-    /// one pass over the triangles ([`IndexedCaps::cap_signs_many`]), then
-    /// packed into the group's signed table in `scratch`, which
+    /// one pass over the triangles, which writes them as the group's signed
+    /// table in `scratch` ([`IndexedCaps::cap_sign_pairs`]), the table
     /// [`OrderedEvaluation::group_sides`] reads. The same bits as a call
     /// of `cap_signs` per light.
     ///
@@ -241,8 +241,10 @@ impl OrderedEvaluation {
         self.caps.cap_sign_pairs(lights, &mut scratch.table);
         // Back to input order: each triangle's entry to its place in a
         // table in input order, then one array per light from that table,
-        // in order. Writing each light's byte straight to its place took
-        // as long and more memory.
+        // in order. Writing each light's byte straight to its place, which
+        // needs no table in input order, made the whole evaluation slower
+        // on the dragon (1.76–1.77 against 1.58–1.61 ms a light, a local
+        // probe; benches/ROUNDS.md, twenty-eighth round).
         scratch.input.resize(n, 0);
         let input = ScatterTo(scratch.input.as_mut_ptr());
         scratch
@@ -344,8 +346,8 @@ impl OrderedEvaluation {
     }
 }
 
-/// The scratch of a group of lights: each light's signs in evaluation
-/// order, and the group's signed table (see
+/// The scratch of a group of lights: the group's signed table in
+/// evaluation order, and its `1 + s` entries in input order (see
 /// [`OrderedEvaluation::group_cap_signs`]). Kept between groups like the
 /// other buffers.
 #[derive(Debug, Clone, Default)]
