@@ -193,17 +193,8 @@ impl IndexedCaps {
         let lights: [Light; N] = lights.try_into().expect("a group of N lights");
         let on_corner = lights.iter().any(|&l| self.light_on_a_corner(l));
         let mut outs = out.iter_mut();
-        let mut chunks: [_; N] =
-            std::array::from_fn(|_| outs.next().expect("N outputs").chunks_mut(CHUNK));
-        let jobs: Vec<Bytes<N>> = (0..self.sorted.len().div_ceil(CHUNK))
-            .map(|_| {
-                Bytes(
-                    chunks
-                        .each_mut()
-                        .map(|c| c.next().expect("a chunk per output")),
-                )
-            })
-            .collect();
+        let out: [&mut [i8]; N] = std::array::from_fn(|_| &mut **outs.next().expect("N outputs"));
+        let jobs: Vec<Bytes<N>> = chunks_of(out, CHUNK).into_iter().map(Bytes).collect();
         jobs.into_par_iter()
             .zip(self.sorted.par_chunks(CHUNK))
             .zip(self.odd.par_chunks(CHUNK))
@@ -350,6 +341,20 @@ unsafe fn signs_impl<const AVX2: bool, const TEST: bool>(
 ) {
     // SAFETY: the caller's.
     unsafe { signs_many_impl::<AVX2, TEST, 1, _>(points, sorted, odd, [l], &mut Bytes([out])) }
+}
+
+/// The `N` outputs cut into pieces of `chunk` bytes, the pieces at the
+/// same place together: one rayon task each.
+pub(crate) fn chunks_of<const N: usize>(out: [&mut [i8]; N], chunk: usize) -> Vec<[&mut [i8]; N]> {
+    let pieces = out
+        .iter()
+        .map(|o| o.len().div_ceil(chunk))
+        .max()
+        .unwrap_or(0);
+    let mut out = out.map(|o| o.chunks_mut(chunk));
+    (0..pieces)
+        .map(|_| out.each_mut().map(|o| o.next().unwrap_or_default()))
+        .collect()
 }
 
 /// Where the kernel puts each light's signs.

@@ -62,7 +62,7 @@
 //! runs; the caps alone 0.61–0.64 against 1.11–1.26 ms per light; a local
 //! probe put the sides at 0.5 ms per light against 0.85 ms).
 
-use crate::evaluate_indexed::{IndexedCaps, LIGHT_GROUP};
+use crate::evaluate_indexed::{IndexedCaps, LIGHT_GROUP, chunks_of};
 use crate::multiplicity::Light;
 use crate::verify::UNKNOWN;
 use rayon::prelude::*;
@@ -354,20 +354,6 @@ impl OrderedEvaluation {
 pub struct GroupScratch {
     table: Vec<u32>,
     input: Vec<u32>,
-}
-
-/// The `N` outputs cut into pieces of `chunk` bytes, the pieces at the
-/// same place together: one rayon task each.
-fn chunks_of<const N: usize>(out: [&mut [i8]; N], chunk: usize) -> Vec<[&mut [i8]; N]> {
-    let pieces = out
-        .iter()
-        .map(|o| o.len().div_ceil(chunk))
-        .max()
-        .unwrap_or(0);
-    let mut out = out.map(|o| o.chunks_mut(chunk));
-    (0..pieces)
-        .map(|_| out.each_mut().map(|o| o.next().unwrap_or_default()))
-        .collect()
 }
 
 /// A slice the caps' tasks share, each writing elements no other task
