@@ -157,6 +157,17 @@ def row(target, measured, met):
     print(f"| {target} | {measured} | {met} |")
 
 
+def met_at(fastest, median):
+    """The "met?" cell of a target measured at the fastest and at the median
+    of the rounds: either can meet it without the other (a slow phase of the
+    machine can take the fastest two-thread round's ratio under the median's)."""
+    if fastest and median:
+        return "yes"
+    if fastest:
+        return "at the fastest"
+    return "at the median" if median else "no"
+
+
 def main():
     args = sys.argv[1:]
     def option(name, default):
@@ -212,7 +223,7 @@ def main():
         row(f"after parsing ≤ 80 ns per triangle, one thread ({name})",
             f"fastest {fast:.1f} ms = **{fast * 1e6 / n:.0f} ns**, median {med:.1f} ms = "
             f"{med * 1e6 / n:.0f} ns",
-            "yes" if med * 1e6 / n <= 80 else ("at the fastest" if fast * 1e6 / n <= 80 else "no"))
+            met_at(fast * 1e6 / n <= 80, med * 1e6 / n <= 80))
     for name, times, _, _, _ in results:
         fast = min(times[1]) / min(times[2])
         med = statistics.median(times[1]) / statistics.median(times[2])
@@ -220,7 +231,7 @@ def main():
             f"{min(times[1]):.1f} → {min(times[2]):.1f} ms: **{fast:.2f}×** at the fastest; "
             f"{statistics.median(times[1]):.1f} → {statistics.median(times[2]):.1f} ms: {med:.2f}× "
             f"at the median; every output identical",
-            "yes" if min(fast, med) >= 1.6 else ("at the fastest" if fast >= 1.6 else "no"))
+            met_at(fast >= 1.6, med >= 1.6))
     for name, _, peaks, sizes, _ in results:
         base = sizes["inputs"] + sizes["output"]
         row(f"peak memory ≤ 2.5 × (input positions and indices + output) ({name})",
