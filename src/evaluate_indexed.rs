@@ -46,8 +46,9 @@ pub struct IndexedCaps {
     /// The positions the triangles use as `x, y, z, 0` (one 16-byte load
     /// per corner), in order of first use.
     points: Vec<[f32; 4]>,
-    /// Per triangle, its corner ids into `points` in the order the
-    /// contract's three-comparator network sorts the corners to.
+    /// Per triangle, its corners in the order the contract's
+    /// three-comparator network sorts them to, each as twice its id into
+    /// `points` (see [`row`]).
     sorted: Vec<[u32; 3]>,
     /// Per triangle, whether that sort was an odd permutation.
     odd: Vec<bool>,
@@ -81,7 +82,8 @@ impl IndexedCaps {
             return None;
         }
         let n = positions.len();
-        if caps.iter().flatten().any(|&i| i as usize >= n) {
+        // (Twice an id must fit a u32: see `row`.)
+        if n > 1 << 31 || caps.iter().flatten().any(|&i| i as usize >= n) {
             return None;
         }
         let (mut sorted, odd): (Vec<[u32; 3]>, Vec<bool>) =
@@ -102,7 +104,7 @@ impl IndexedCaps {
                 let p = positions[*id as usize];
                 points.push([p[0], p[1], p[2], 0.0]);
             }
-            *id = *r;
+            *id = 2 * *r;
         }
         // `positions` is in lexicographic order, so the used ones, renamed,
         // are too.
@@ -230,8 +232,8 @@ impl IndexedCaps {
     ) {
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::have_avx2() {
-            // SAFETY: the CPU has AVX2 (checked just above); every id is
-            // below points.len() (checked by `new`).
+            // SAFETY: the CPU has AVX2 (checked just above); every corner
+            // names a row of points (`new` stores them so).
             return unsafe {
                 if on_corner {
                     signs_many_avx2::<true, N, _>(&self.points, sorted, odd, lights, sink)
@@ -240,7 +242,7 @@ impl IndexedCaps {
                 }
             };
         }
-        // SAFETY: every id is below points.len() (checked by `new`).
+        // SAFETY: every corner names a row of points (`new` stores them so).
         unsafe { signs_many_impl::<false, true, N, _>(&self.points, sorted, odd, lights, sink) }
     }
 
@@ -251,9 +253,9 @@ impl IndexedCaps {
     fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, on_corner: bool, out: &mut [i8]) {
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::gather_caps() && self.points.len() <= MAX_GATHER_POINTS {
-            // SAFETY: the CPU has AVX-512F (`gather_caps` checks it); every id is
-            // below points.len() (checked by `new`), whose float offsets fit
-            // an i32 (checked just above).
+            // SAFETY: the CPU has AVX-512F (`gather_caps` checks it); every
+            // corner names a row of points (`new` stores them so), whose
+            // float offsets fit an i32 (checked just above).
             return unsafe {
                 if on_corner {
                     signs_avx512::<true>(&self.points, sorted, odd, l, out)
@@ -264,8 +266,8 @@ impl IndexedCaps {
         }
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::have_avx2() {
-            // SAFETY: the CPU has AVX2 (checked just above); every id is
-            // below points.len() (checked by `new`).
+            // SAFETY: the CPU has AVX2 (checked just above); every corner
+            // names a row of points (`new` stores them so).
             return unsafe {
                 let out = &mut Bytes([out]);
                 if on_corner {
@@ -275,8 +277,36 @@ impl IndexedCaps {
                 }
             };
         }
-        // SAFETY: every id is below points.len() (checked by `new`).
+        // SAFETY: every corner names a row of points (`new` stores them so).
         unsafe { signs_impl::<false, true>(&self.points, sorted, odd, l, out) }
+    }
+}
+
+/// The row of `points` a stored corner `r` (twice the row's id) names.
+///
+/// Why twice: a row is 16 bytes, and an x86 address scales an index by at
+/// most 8, so a corner stored as its id took a shift before each of the
+/// 24 row loads of an AVX2 block (with the id's load, 48 of the block's
+/// ~150 instructions for one light); stored doubled, each row load
+/// addresses `base + 8·r` itself. With the odd flip on the float
+/// (`evaluate_simd::sorted_sign_off_corners`), the one-light block went
+/// from about 150 to 120 instructions, and the dragon's caps from 1.026,
+/// 1.079 and 1.043 ms to 0.996, 1.026 and 1.036 ms (`RAYON_NUM_THREADS=1
+/// cargo bench --bench evaluate -- 'dragon_full/caps/reference_indexed$'`,
+/// three alternations of the two bench binaries): the shifts were cheap,
+/// and the caps are not bound by instruction count alone.
+///
+/// # Safety
+/// `r / 2` must be below `points.len()`, and `r` even.
+#[inline(always)]
+unsafe fn row(points: &[[f32; 4]], r: u32) -> &[f32; 4] {
+    // SAFETY: the caller's: 8·r bytes on is row r / 2.
+    unsafe {
+        &*points
+            .as_ptr()
+            .cast::<[f32; 2]>()
+            .add(r as usize)
+            .cast::<[f32; 4]>()
     }
 }
 
@@ -290,7 +320,7 @@ impl IndexedCaps {
 /// target/dragon/dragon.glb` with each binary).
 ///
 /// # Safety
-/// Every id of `t` must be below `points.len()`.
+/// Every corner of `t` must name a row of `points` (see [`row`]).
 #[inline(always)]
 unsafe fn gather<const AVX2: bool>(
     points: &[[f32; 4]],
@@ -299,8 +329,7 @@ unsafe fn gather<const AVX2: bool>(
     dst: &mut Corner,
 ) {
     // SAFETY: the caller's.
-    let rows: [&[f32; 4]; LANES] =
-        std::array::from_fn(|i| unsafe { points.get_unchecked(t[i][c] as usize) });
+    let rows: [&[f32; 4]; LANES] = std::array::from_fn(|i| unsafe { row(points, t[i][c]) });
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is true only in code compiled with the `avx2`
@@ -329,8 +358,8 @@ unsafe fn gather<const AVX2: bool>(
 /// evaluate target/dragon/dragon.glb` with each binary).
 ///
 /// # Safety
-/// Every id of `sorted` must be below `points.len()` (as `IndexedCaps::new`
-/// makes them).
+/// Every corner of `sorted` must name a row of `points` ([`row`], as
+/// `IndexedCaps::new` stores them).
 #[inline(always)]
 unsafe fn signs_impl<const AVX2: bool, const TEST: bool>(
     points: &[[f32; 4]],
@@ -431,7 +460,7 @@ impl Sink<LIGHT_GROUP> for Pairs<'_> {
 /// same bits.
 ///
 /// # Safety
-/// Every id of `sorted` must be below `points.len()`.
+/// Every corner of `sorted` must name a row of `points` ([`row`]).
 #[inline(always)]
 unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S: Sink<N>>(
     points: &[[f32; 4]],
@@ -440,8 +469,9 @@ unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S:
     lights: [Light; N],
     sink: &mut S,
 ) {
-    let xyz = |i: u32| {
-        let p = points[i as usize];
+    let xyz = |r: u32| {
+        // SAFETY: the caller's.
+        let p = unsafe { row(points, r) };
         [p[0], p[1], p[2]]
     };
     let mut tris = sorted.chunks_exact(LANES);
@@ -476,8 +506,8 @@ unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S:
 /// [`signs_many_impl`] compiled with AVX2.
 ///
 /// # Safety
-/// The CPU must have AVX2, and every id of `sorted` must be below
-/// `points.len()`.
+/// The CPU must have AVX2, and every corner of `sorted` must name a row
+/// of `points` ([`row`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn signs_many_avx2<const TEST: bool, const N: usize, S: Sink<N>>(
@@ -513,8 +543,9 @@ const WIDE: usize = 16;
 /// [`signs_impl`].
 ///
 /// # Safety
-/// The CPU must have AVX-512F, every id in `sorted` must be below
-/// `points.len()`, and `points.len()` at most [`MAX_GATHER_POINTS`].
+/// The CPU must have AVX-512F, every corner in `sorted` must name a row of
+/// `points` ([`row`]), and `points.len()` must be at most
+/// [`MAX_GATHER_POINTS`].
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2")]
 unsafe fn signs_avx512<const TEST: bool>(
@@ -553,7 +584,8 @@ unsafe fn signs_avx512<const TEST: bool>(
         for (c, p) in p.iter_mut().enumerate() {
             let (a, b) = perm[c];
             let id = _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(v[0], a, v[1]), b, v[2]);
-            let off = _mm512_slli_epi32::<2>(id);
+            // (Float offset 4·id from the stored 2·id: see `row`.)
+            let off = _mm512_slli_epi32::<1>(id);
             // SAFETY: id < points.len() (caller), so 4·id + 0..=2 index the
             // table's floats and fit an i32 (caller); the 64-bit gathers
             // read floats 4·id and 4·id + 1.

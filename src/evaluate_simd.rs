@@ -85,8 +85,12 @@ pub(crate) fn sorted_sign_off_corners(
 ) -> i32 {
     // The contract's expression, written once (multiplicity::ref_expr).
     let s = crate::multiplicity::ref_expr(r0, r1, r2, l);
-    let sign = (s > 0.0) as i32 - (s < 0.0) as i32;
-    if odd { -sign } else { sign }
+    // The odd permutation's flip on the float, before the comparisons:
+    // negation (the sign bit flipped) is exact, so the sign of `-s` is
+    // minus the sign of `s` (0 for both zeros and for NaN), and the
+    // vectorised kernels flip a bit instead of negating bytes and blending.
+    let s = f32::from_bits(s.to_bits() ^ (u32::from(odd) << 31));
+    (s > 0.0) as i32 - (s < 0.0) as i32
 }
 
 #[inline(always)]
