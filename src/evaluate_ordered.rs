@@ -14,8 +14,11 @@
 //! the first-level cache, and each slot's number fits 16 bits over a base
 //! per block. The caps' corners, renumbered in the same order, are closer
 //! too. The caller still gets the signs in input order: one scattered
-//! write per triangle, a third as many accesses as the reads it replaces,
-//! but each still a cache miss, which takes most of what the sides gain.
+//! access per triangle, a third as many as the reads it replaces, but
+//! each still a first-level cache miss, which takes most of what the
+//! sides gain. For one light it is a read (each triangle of the input
+//! order reads its sign through its evaluation number); for a group of
+//! lights a write (see [`OrderedEvaluation::group_cap_signs`]).
 //!
 //! On the dragon, one thread (`cargo run --release --example stage_probe
 //! -- evaluate target/dragon/dragon.glb`, its `auto` and `input order`
@@ -31,7 +34,7 @@
 //! Per light:
 //! 1. The caps, in evaluation order ([`IndexedCaps`] over the triangles
 //!    renumbered so): each sign `s` of triangle `i` is written as the pair
-//!    `(s, −s)` at `2i, 2i + 1` of the *signed* table, and as `s` at the
+//!    `(s, −s)` at `2i, 2i + 1` of the *signed* table, and reaches the
 //!    triangle's place in input order.
 //! 2. The sides: slot `j` of a record stores `2i + odd` (its triangle and
 //!    whether its corners are an odd permutation of the triangle's, see
@@ -103,6 +106,10 @@ pub struct OrderedEvaluation {
     caps: IndexedCaps,
     /// Per evaluation number: the triangle's number in input order.
     order: Vec<u32>,
+    /// Per triangle in input order: its evaluation number (the inverse of
+    /// `order`), which one light's signs are read back through
+    /// ([`OrderedEvaluation::cap_signs`]).
+    rank: Vec<u32>,
     /// Per sides bucket, in the file's order.
     buckets: Vec<PackedSlots>,
 }
@@ -153,6 +160,7 @@ impl OrderedEvaluation {
         Some(OrderedEvaluation {
             caps,
             order,
+            rank,
             buckets,
         })
     }
@@ -179,34 +187,46 @@ impl OrderedEvaluation {
     /// [`OrderedEvaluation::sides`] reads, then the signs in evaluation
     /// order.
     ///
-    /// The signs are computed in one pass, then paired and sent to their
-    /// places in input order in a second: done per chunk right after the
-    /// signs, the scattered writes made the whole evaluation slower on
-    /// the dragon (0.91–0.94 of the input-order path's time instead of
-    /// 0.85–0.88, fastest of 60 alternated rounds, three runs of a local
-    /// probe; benches/ROUNDS.md, Twenty-sixth round).
+    /// The signs are computed in one pass, then paired in a second, and
+    /// put in input order in a third, which reads each triangle's sign
+    /// through its evaluation number (`rank`): the reads land anywhere in
+    /// the signs (871 KB on the dragon), but in the second-level cache,
+    /// and the writes go in order. Until the thirtieth round each sign
+    /// was written to its place instead, in the pairing pass (done per
+    /// chunk right after the signs, those writes had made the whole
+    /// evaluation slower, benches/ROUNDS.md, Twenty-sixth round). The
+    /// reads against those writes, the dragon's whole one-light
+    /// evaluation, fastest of 40 alternated rounds, six alternations of
+    /// the two binaries (`cargo run --release --example stage_probe --
+    /// evaluate target/dragon/dragon.glb`, its `auto` row): 2.608–2.880
+    /// against 2.776–3.135 ms, 4.6–12.6% less in each pair. The group's
+    /// table is a `u32` per triangle, 7 MB on the dragon, and there the
+    /// reads were slower than the writes (benches/ROUNDS.md,
+    /// Twenty-eighth round).
     pub fn cap_signs(&self, l: Light, scratch: &mut Vec<i8>, out: &mut [i8]) {
         let n = self.order.len();
         assert_eq!(out.len(), n, "caps size mismatch");
         scratch.resize(3 * n, 0);
         let (pairs, signs) = scratch.split_at_mut(2 * n);
         self.caps.cap_signs(l, signs);
-        let out = ScatterTo(out.as_mut_ptr());
         pairs
             .par_chunks_mut(2 * CHUNK)
             .zip(signs.par_chunks(CHUNK))
-            .zip(self.order.par_chunks(CHUNK))
-            .for_each(|((pairs, signs), order)| {
+            .for_each(|(pairs, signs)| {
                 for (p, &s) in pairs.chunks_exact_mut(2).zip(signs) {
                     p[0] = s;
                     p[1] = s.wrapping_neg();
                 }
-                let out = out.ptr();
-                for (&t, &s) in order.iter().zip(signs) {
-                    // SAFETY: `order` is a permutation of 0..n (`new`
-                    // numbers each triangle once), so every write is inside
-                    // `out` and no two tasks write the same byte.
-                    unsafe { *out.add(t as usize) = s };
+            });
+        let signs = &*signs;
+        out.par_chunks_mut(CHUNK)
+            .zip(self.rank.par_chunks(CHUNK))
+            .for_each(|(out, rank)| {
+                for (o, &r) in out.iter_mut().zip(rank) {
+                    // SAFETY: `rank` is a permutation of 0..n (`new`
+                    // numbers each triangle once), so every read is inside
+                    // `signs`.
+                    *o = unsafe { *signs.get_unchecked(r as usize) };
                 }
             });
     }
@@ -360,8 +380,7 @@ pub struct GroupScratch {
 /// writes.
 struct ScatterTo<T>(*mut T);
 
-// SAFETY: the tasks write disjoint elements (see `cap_signs` and
-// `group_cap_signs`).
+// SAFETY: the tasks write disjoint elements (see `group_cap_signs`).
 unsafe impl<T> Sync for ScatterTo<T> {}
 
 impl<T> ScatterTo<T> {
