@@ -583,9 +583,10 @@ unsafe fn signs_avx512<const TEST: bool>(
         let mut p = [[[0f32; WIDE]; 3]; 3];
         for (c, p) in p.iter_mut().enumerate() {
             let (a, b) = perm[c];
-            let id = _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(v[0], a, v[1]), b, v[2]);
-            // (Float offset 4·id from the stored 2·id: see `row`.)
-            let off = _mm512_slli_epi32::<1>(id);
+            // The corners as stored, twice their ids (see `row`).
+            let twice =
+                _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(v[0], a, v[1]), b, v[2]);
+            let off = _mm512_slli_epi32::<1>(twice);
             // SAFETY: id < points.len() (caller), so 4·id + 0..=2 index the
             // table's floats and fit an i32 (caller); the 64-bit gathers
             // read floats 4·id and 4·id + 1.

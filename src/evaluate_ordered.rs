@@ -23,13 +23,16 @@
 //! On the dragon, one thread (`cargo run --release --example stage_probe
 //! -- evaluate target/dragon/dragon.glb`, its `auto` and `input order`
 //! rows: fastest / median of 40 alternated rounds, five runs, on an AMD
-//! EPYC, Zen 4): the whole evaluation 3.01–3.48 / 3.33–3.83 ms here
+//! EPYC, Zen 4, twenty-sixth round, with one light's signs still written
+//! to input order): the whole evaluation 3.01–3.48 / 3.33–3.83 ms here
 //! against 2.97–3.67 / 3.46–4.34 ms with the same kernels in input order,
 //! which took 0.99–1.06× this path's time at the fastest and 1.02–1.13× at
 //! the median; the caps alone 1.31–1.44 against 1.51–1.72 ms at the
 //! fastest. Local probes put the rest at about 0.45 ms for the scattered
 //! writes and 0.85 ms for the sides (2.3–2.5 ms for the sides in input
-//! order with their gathers, the caps computed once).
+//! order with their gathers, the caps computed once). Reading the signs
+//! back instead of writing them took 4.6–12.6% off the whole (thirtieth
+//! round, see [`OrderedEvaluation::cap_signs`]).
 //!
 //! Per light:
 //! 1. The caps, in evaluation order ([`IndexedCaps`] over the triangles
