@@ -305,8 +305,8 @@ const VERTEX_BLOCK: usize = 1 << 16;
 /// (median 59.1) with at most 1,024, seven alternations of `RECYCLE=1
 /// cargo run --release --example stage_probe -- weld`; 512: 58.0–58.8,
 /// two runs; the dragon (which took 4,096 and now takes 1,024) 9.9–11.0
-/// against 9.8–10.7 ms; two threads, whose scatter parts each write half
-/// the buckets, unchanged.
+/// against 9.8–10.7 ms; two threads, whose scatter parts then each wrote
+/// half the buckets, unchanged.
 const MAX_BUCKETS: usize = 1 << 10;
 
 /// How many words ahead of its next slot [`sort_vertices`]' scatter asks
@@ -400,71 +400,84 @@ fn sort_vertices<'w>(
     // benches/ROUNDS.md "Seventeenth round").
     // (Rounded up to a large block: see `alloc::large_capacity`.)
     let mut ids = crate::alloc::zeroed_large::<u16>(n);
-    let sizes = positions
-        .par_chunks(VERTEX_BLOCK)
-        .zip(ids.par_chunks_mut(VERTEX_BLOCK))
+    // The input cut into one part per thread, each with its counts of
+    // every bucket (its vertices' buckets computed a block at a time).
+    let part_len = n.div_ceil(rayon::current_num_threads().max(1)).max(1);
+    let counts: Vec<Vec<u32>> = positions
+        .par_chunks(part_len)
+        .zip(ids.par_chunks_mut(part_len))
         .map(|(c, ids)| {
-            for (p, id) in c.iter().zip(ids.iter_mut()) {
-                *id = bucket(p[0]) as u16;
-            }
             let mut count = vec![0u32; buckets];
-            for &b in ids.iter() {
-                count[b as usize] += 1;
+            for (c, ids) in c.chunks(VERTEX_BLOCK).zip(ids.chunks_mut(VERTEX_BLOCK)) {
+                for (p, id) in c.iter().zip(ids.iter_mut()) {
+                    *id = bucket(p[0]) as u16;
+                }
+                for &b in ids.iter() {
+                    count[b as usize] += 1;
+                }
             }
             count
         })
-        .reduce(
-            || vec![0u32; buckets],
-            |mut a, b| {
-                a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
-                a
-            },
-        );
-
-    // The scatter, in one part per thread: each part is a run of buckets
-    // (a contiguous range of `words`) and a pass over all vertices that
-    // writes only its own buckets' words. However the buckets are split,
-    // every bucket gets its vertices in input order, so the words are the
-    // same whatever the number of threads.
-    let parts = rayon::current_num_threads().clamp(1, buckets);
-    let mut jobs = Vec::with_capacity(parts);
-    let mut rest = &mut *words;
-    let (mut first, mut done) = (0, 0);
-    for part in 1..=parts {
-        // Buckets up to about part / parts of the words.
-        let mut last = first;
-        let mut size = 0;
-        while last < buckets && (done + size < n * part / parts || part == parts) {
-            size += sizes[last] as usize;
-            last += 1;
-        }
-        let (head, tail) = rest.split_at_mut(size);
-        jobs.push((first, last, head));
-        rest = tail;
-        first = last;
-        done += size;
+        .collect();
+    let mut sizes = vec![0u32; buckets];
+    for c in &counts {
+        sizes.iter_mut().zip(c).for_each(|(s, c)| *s += c);
     }
-    jobs.into_par_iter().for_each(|(first, last, out)| {
-        if out.is_empty() {
-            return;
-        }
-        let mut next = vec![0u32; last - first];
-        let mut sum = 0;
-        for (c, &size) in next.iter_mut().zip(&sizes[first..last]) {
-            *c = sum;
-            sum += size;
-        }
-        for (i, (&p, &b)) in positions.iter().zip(&ids).enumerate() {
-            crate::hint::prefetch_stream(positions.as_ptr().wrapping_add(i));
-            // Out-of-part buckets wrap around to past the end.
-            if let Some(c) = next.get_mut((b as usize).wrapping_sub(first)) {
+
+    // The scatter, one part of the input per thread: in every bucket, part
+    // `i` writes its words after those of parts `0..i` (`next`, each
+    // part's first slot in every bucket), so every bucket gets its
+    // vertices in input order whatever the number of threads.
+    //
+    // Until the thirty-first round each thread took a run of buckets
+    // instead, and read every vertex to find its own: with two threads
+    // each read all the input, and the parts branched on every vertex's
+    // bucket. The dragon's sort with two threads 4.48–4.51 → 3.78–3.79 ms
+    // (one thread 7.43–7.51 → 7.26–7.29 ms), the 5M scene's 19.2–19.4 →
+    // 18.6–19.3 ms (`RECYCLE=1 RAYON_NUM_THREADS=T cargo run --release
+    // --example stage_probe -- weld FILE`, three and two alternations).
+    let mut first_slot = 0;
+    let mut starts: Vec<u32> = sizes
+        .iter()
+        .map(|&s| {
+            first_slot += s;
+            first_slot - s
+        })
+        .collect();
+    let next: Vec<Vec<u32>> = counts
+        .iter()
+        .map(|c| {
+            let part = starts.clone();
+            starts.iter_mut().zip(c).for_each(|(s, c)| *s += c);
+            part
+        })
+        .collect();
+    let out = SharedSlots(words.as_mut_ptr());
+    positions
+        .par_chunks(part_len)
+        .zip(ids.par_chunks(part_len))
+        .zip(next)
+        .enumerate()
+        .for_each(|(part, ((c, ids), mut next))| {
+            let out = &out;
+            let first = part * part_len;
+            for (i, (&p, &b)) in c.iter().zip(ids).enumerate() {
+                crate::hint::prefetch_stream(c.as_ptr().wrapping_add(i));
+                let slot = &mut next[b as usize];
                 // The bucket's line four lines on: see `SCATTER_AHEAD`.
-                crate::hint::prefetch_ptr(out.as_ptr().wrapping_add(*c as usize + SCATTER_AHEAD));
-                out[*c as usize] = MaybeUninit::new(vertex_word(p, i));
-                *c += 1;
+                crate::hint::prefetch_ptr(out.0.wrapping_add(*slot as usize + SCATTER_AHEAD));
+                // SAFETY: the slot is below n (the buckets' sizes add up
+                // to n), and each is this part's alone: parts get disjoint
+                // runs of slots in every bucket, and `next` steps through
+                // this part's run.
+                unsafe {
+                    out.0
+                        .add(*slot as usize)
+                        .write(MaybeUninit::new(vertex_word(p, first + i)))
+                };
+                *slot += 1;
             }
-        }
-    });
+        });
     drop(ids);
     // SAFETY: the bucket sizes add up to n, and every bucket got exactly its
     // size of words (each vertex is in one bucket, and its part wrote it).
