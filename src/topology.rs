@@ -1336,60 +1336,44 @@ unsafe fn emit_range_avx512(
         listings.narrow,
         "topology: 32-bit keys need ids below KEY_IDS - 1"
     );
-    // The network's layers: each lane's partner, and the lanes that take
-    // the larger key.
-    const LAYERS: [([i32; 8], u8); 6] = {
-        const PAIRS: [&[(usize, usize)]; 6] = NETWORK8;
-        let mut layers = [([0i32; 8], 0u8); 6];
-        let mut l = 0;
-        while l < 6 {
-            let mut i = 0;
-            while i < 8 {
-                layers[l].0[i] = i as i32;
-                i += 1;
-            }
-            let mut p = 0;
-            while p < PAIRS[l].len() {
-                let (lo, hi) = PAIRS[l][p];
-                layers[l].0[lo] = hi as i32;
-                layers[l].0[hi] = lo as i32;
-                layers[l].1 |= 1 << hi;
-                p += 1;
-            }
-            l += 1;
-        }
-        layers
-    };
-    // SAFETY: each row is 8 i32.
-    let partners =
-        LAYERS.map(|(p, upper)| (unsafe { _mm256_loadu_si256(p.as_ptr().cast()) }, upper));
     let rank = _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
     let reverse = _mm256_set_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let none = _mm512_set1_epi32(-1);
-    // One layer of compare-exchanges: lane i against lane `partner[i]`,
-    // the lanes in `upper` keeping the larger key.
+    // One layer of compare-exchanges: lane i against `partner`'s lane i
+    // (the keys `s` permuted), the lanes in `upper` keeping the larger.
     let layer = |s: __m256i, partner: __m256i, upper: u8| {
-        let p = _mm256_permutexvar_epi32(partner, s);
-        _mm256_mask_blend_epi32(upper, _mm256_min_epu32(s, p), _mm256_max_epu32(s, p))
+        _mm256_mask_blend_epi32(
+            upper,
+            _mm256_min_epu32(s, partner),
+            _mm256_max_epu32(s, partner),
+        )
     };
-    let sort8 = |mut s: __m256i| {
-        for &(partner, upper) in &partners {
-            s = layer(s, partner, upper);
-        }
-        s
+    // Partners at distance 1 and 2 lie in the same 128-bit half, where a
+    // `vpshufd` finds them; distance 4 swaps the halves.
+    let d1 = |s: __m256i, upper: u8| layer(s, _mm256_shuffle_epi32::<0xB1>(s), upper);
+    let d2 = |s: __m256i, upper: u8| layer(s, _mm256_shuffle_epi32::<0x4E>(s), upper);
+    let d4 = |s: __m256i, upper: u8| layer(s, _mm256_permute4x64_epi64::<0x4E>(s), upper);
+    // Sorts 8 keys in 6 layers, 5 of them inside the halves: each half by
+    // the network of 4 ((0,1)(2,3), (0,2)(1,3), (1,2)), then the halves
+    // merged (lane i against lane 7 − i, then half-cleaners at distances 2
+    // and 1). Why not an optimal network of 8 (`NETWORK8`, 19
+    // compare-exchanges against these 22, also 6 layers, which this kernel
+    // ran until the thirty-first round): four of its layers pair lanes of
+    // different halves, each a `vpermd`, whose latency the pass waits on:
+    // a vertex's records go through load, compress, network and
+    // compress one after the other. One thread, the emit pass 8.96–9.05 →
+    // 8.05–8.11 ms on the dragon (`RECYCLE=1 cargo run --release --example
+    // stage_probe -- passes`, four alternations; 8.57–8.65 ms with only
+    // NETWORK8's in-half layers by `vpshufd`).
+    let sort8 = |s: __m256i| {
+        let s = d1(s, 0xAA);
+        let s = d2(s, 0xCC);
+        let s = layer(s, _mm256_shuffle_epi32::<0xD8>(s), 0x44);
+        let s = layer(s, _mm256_permutexvar_epi32(reverse, s), 0xF0);
+        d1(d2(s, 0xCC), 0xAA)
     };
     // Half-cleaners at distances 4, 2 and 1: sorts a bitonic sequence.
-    let cleaners = [
-        (_mm256_set_epi32(3, 2, 1, 0, 7, 6, 5, 4), 0xF0u8),
-        (_mm256_set_epi32(5, 4, 7, 6, 1, 0, 3, 2), 0xCC),
-        (_mm256_set_epi32(6, 7, 4, 5, 2, 3, 0, 1), 0xAA),
-    ];
-    let merge8 = |mut s: __m256i| {
-        for &(partner, upper) in &cleaners {
-            s = layer(s, partner, upper);
-        }
-        s
-    };
+    let merge8 = |s: __m256i| d1(d2(d4(s, 0xF0), 0xCC), 0xAA);
     let rank8 = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0);
     let none8 = _mm256_set1_epi32(-1);
     // Writes `k` (at most 8) sorted records of vertex `v` and their edges:
@@ -1600,7 +1584,7 @@ fn sort_small(src: &[[u32; 4]; SMALL_RUN], m: usize) -> [u64; SMALL_RUN + 1] {
 
 /// An optimal sorting network for 8 inputs (19 compare-exchanges, depth 6),
 /// layer by layer: the pairs of a layer are disjoint. [`sort_small`] runs
-/// it on scalars, `emit_range_avx512` a layer at a time in one register.
+/// it on scalars (`emit_range_avx512` has a network of its own).
 const NETWORK8: [&[(usize, usize)]; 6] = [
     &[(0, 2), (1, 3), (4, 6), (5, 7)],
     &[(0, 4), (1, 5), (2, 6), (3, 7)],
