@@ -1361,10 +1361,11 @@ unsafe fn emit_range_avx512(
     // ran until the thirty-first round): four of its layers pair lanes of
     // different halves, each a `vpermd`, whose latency the pass waits on:
     // a vertex's records go through load, compress, network and
-    // compress one after the other. One thread, the emit pass 8.96–9.05 →
-    // 8.05–8.11 ms on the dragon (`RECYCLE=1 cargo run --release --example
-    // stage_probe -- passes`, four alternations; 8.57–8.65 ms with only
-    // NETWORK8's in-half layers by `vpshufd`).
+    // compress one after the other. One thread, the emit pass 8.95–9.01 →
+    // 8.10–8.14 ms on the dragon and 50.4–50.5 → 45.9–46.3 ms on the 5M
+    // scene (`RECYCLE=1 cargo run --release --example stage_probe --
+    // passes`, three and two alternations; on the dragon 8.57–8.65 ms
+    // with only NETWORK8's in-half layers by `vpshufd`).
     let sort8 = |s: __m256i| {
         let s = d1(s, 0xAA);
         let s = d2(s, 0xCC);
@@ -1483,6 +1484,30 @@ unsafe fn emit_range_avx512(
                 out.records + k <= out.a.len(),
                 "topology: records miscounted"
             );
+            if l <= 4 {
+                // At most 8 words: keys made in place, with the rank of
+                // each record its word's lane and the other lanes all
+                // ones, so no compress stands between the load and the
+                // network (the path below, where 16 words need one: a
+                // `vpcompressd` of a whole register, whose latency the
+                // vertex waits on as it waits on the network's). One
+                // thread, the emit pass 8.10–8.14 → 7.72–7.75 ms on the
+                // dragon, where a vertex has 4 listings on average, and
+                // 45.9–46.3 → 40.9–41.3 ms on the 5M scene (`RECYCLE=1
+                // cargo run --release --example stage_probe -- passes`,
+                // three and two alternations). The same for 5 to 8
+                // listings, two networks of 8 and a merge instead of the
+                // compress, was slower on the dragon: 8.09–8.14 against
+                // 7.72–8.01 ms.
+                let keys = _mm256_mask_blend_epi32(
+                    records as u8,
+                    none8,
+                    _mm256_or_si256(_mm256_slli_epi32::<4>(_mm512_castsi512_si256(x)), rank8),
+                );
+                let opp = _mm512_castsi512_si256(swapped);
+                finish(&mut out, sort8(keys), none8, opp, opp, k, v);
+                continue;
+            }
             let kmask = ((1u32 << k) - 1) as u16;
             // Keys `larger << 4 | rank`, all ones past the last record
             // (whose larger endpoint no record has: `narrow`).
