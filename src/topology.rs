@@ -105,9 +105,10 @@ impl Edges {
 ///    of 4),
 ///    its triangles straight to their final place, and its edges one after
 ///    the other from the group's first record's offset (edges never
-///    outnumber records). Where the CPU has AVX-512 (and the mesh fewer
-///    than 2^28 vertices), a vertex with at most 8 listings (so at most 16
-///    records) is done in registers (`emit_range_avx512`): 14.5–15.0 →
+///    outnumber records). Where the CPU has AVX-512 and BMI2 (and the mesh
+///    fewer than 2^28 vertices), each listing is unpacked by one `pdep`
+///    (`sort_range_bmi2`) and a vertex with at most 8 listings (so at most
+///    16 records) is done in registers (`emit_range_avx512`): 14.5–15.0 →
 ///    7.1–7.6 ms on the dragon, one thread, on the earlier Intel host
 ///    (`cargo run --release --example stage_probe -- passes`, the two
 ///    versions alternated; 9.1–9.3 ms with the kernel for up to 8 records
@@ -1347,12 +1348,14 @@ fn emit_vertex<const TRI: bool>(
 /// Method, per vertex: its listings in one load; the larger endpoints are
 /// the listings' words as they lie ([p, q] gives p, and q where p < q), the
 /// opposite vertices the same words with each pair swapped; one compress of
-/// each by the mask of records keeps them in listing (so triangle) order.
-/// Keys `larger << 4 | rank` of 32 bits go through the same 8-input
-/// sorting network as [`sort_small`] (a permute, a min, a max and a blend
-/// per layer) in a 256-bit register, or with 9 to 16 records (5.7% of the
-/// dragon's vertices, 10% of its records) through it in two registers and
-/// a bitonic merge: distinct keys, so the result is the stable order. The
+/// each by the mask of records keeps them in listing (so triangle) order
+/// (with at most 4 listings the words stay where they lie, and the other
+/// lanes are padding). Keys `larger << 4 | rank` of 32 bits go through an
+/// 8-input sorting network (a shuffle, a min, a max and a blend per
+/// layer; see `sort8` for why not [`sort_small`]'s) in a 256-bit register,
+/// or with 9 to 16 records (5.7% of the dragon's vertices, 10% of its
+/// records) through it in two registers and a bitonic merge: distinct
+/// keys, so the result is the stable order. The
 /// ranks then permute the opposite vertices; an edge ends where the next
 /// larger endpoint differs, and the edges are compressed out of the
 /// records. Why: the scalar version spends its time moving records
