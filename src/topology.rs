@@ -299,13 +299,7 @@ fn build_edges_in<const TRI: bool>(
                     };
                     odd ^= key(lo, mid) ^ key(lo, hi) ^ key(mid, hi);
                 }
-                // Per range, listings in the high half and records in
-                // the low half: one add for both. All chunks together have
-                // fewer than 2^32 records (asserted above), so the low
-                // halves never carry, even summed over chunks and lanes.
-                let lane = 2 * (i & 1) * ranges;
-                lanes[lane + range_of(lo)] += (1 << 32) | 2;
-                lanes[lane + ranges + range_of(mid)] += (1 << 32) | 1;
+                count_triangle(&mut lanes, ranges, i, range_of(lo), range_of(mid));
             }
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
             (0..ranges)
@@ -772,6 +766,8 @@ impl Scratch {
 /// cargo run --release --example stage_probe -- passes`, three
 /// alternations). The caller asks for it only while `r + 1` is its own:
 /// another job's records go over the next group's listings.
+// Inlined so that `sort_range_bmi2`'s copy is compiled with BMI2, which
+// `Entry::pair_deposited`'s `pdep` needs to be inlined in its loop.
 #[inline(always)]
 fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
     buckets: &Buckets,
@@ -1697,12 +1693,24 @@ unsafe fn count_avx512(tris: &[u32], lanes: &mut [u64], ranges: usize) -> usize 
             );
         }
         for (j, (&l, &m)) in lo_range.iter().zip(&mid_range).enumerate() {
-            let lane = 2 * (j & 1) * ranges;
-            lanes[lane + l as usize] += (1 << 32) | 2;
-            lanes[lane + ranges + m as usize] += (1 << 32) | 1;
+            count_triangle(lanes, ranges, j, l as usize, m as usize);
         }
     }
     16 * blocks
+}
+
+/// Pass 1's count of triangle `i`, whose smallest and middle corners fall
+/// in ranges `lo` and `mid`, into its lane of `lanes` (four planes of
+/// `ranges` counters: lo and mid of even and odd triangles). Per range,
+/// listings in the high half and records in the low half: one add for
+/// both (2 records under lo, 1 under mid). All chunks together have fewer
+/// than 2^32 records (asserted in [`build_edges_in`]), so the low halves
+/// never carry, even summed over chunks and lanes.
+#[inline(always)]
+fn count_triangle(lanes: &mut [u64], ranges: usize, i: usize, lo: usize, mid: usize) {
+    let lane = 2 * (i & 1) * ranges;
+    lanes[lane + lo] += (1 << 32) | 2;
+    lanes[lane + ranges + mid] += (1 << 32) | 1;
 }
 
 /// A triangle's corners in increasing id order (no repeated ids): the
