@@ -561,15 +561,7 @@ unsafe fn signs_avx512<const TEST: bool>(
         // SAFETY: 16 u32 are 64 bytes.
         unsafe { _mm512_loadu_si512(idx.as_ptr().cast()) }
     };
-    // Lane i of corner c is element 3i + c of 48 ids in three vectors
-    // v0 | v1 | v2: the first permute takes elements below 32 from v0, v1;
-    // the second keeps those lanes and takes the rest from v2.
-    let perm = [0, 1, 2].map(|c| {
-        (
-            vector(&|i| (3 * i + c) & 31),
-            vector(&|i| if 3 * i + c < 32 { i } else { 3 * i + c - 16 }),
-        )
-    });
+    let corners = crate::evaluate_simd::TriangleCorners16::new();
     // x (even floats) and y (odd floats) of 2 × 8 gathered pairs.
     let (even, odd_f) = (vector(&|i| 2 * i), vector(&|i| 2 * i + 1));
     let base = points.as_ptr().cast::<f32>();
@@ -582,10 +574,8 @@ unsafe fn signs_avx512<const TEST: bool>(
         let v = unsafe { [0, 16, 32].map(|at| _mm512_loadu_si512(ids.add(at).cast())) };
         let mut p = [[[0f32; WIDE]; 3]; 3];
         for (c, p) in p.iter_mut().enumerate() {
-            let (a, b) = perm[c];
             // The corners as stored, twice their ids (see `row`).
-            let twice =
-                _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(v[0], a, v[1]), b, v[2]);
+            let twice = corners.corner(&v, c);
             let off = _mm512_slli_epi32::<1>(twice);
             // SAFETY: id < points.len() (caller), so 4·id + 0..=2 index the
             // table's floats and fit an i32 (caller); the 64-bit gathers

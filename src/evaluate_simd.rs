@@ -139,6 +139,52 @@ fn load_corner_avx2(r: &[f32], stride: usize, off: usize, dst: &mut Corner) {
     load_rows_avx2(rows, dst)
 }
 
+/// The two-source permutes that split 16 triangles, given as 48 `u32`
+/// (three per triangle) in three 512-bit vectors, into one vector per
+/// corner: lane i of corner c is word 3i + c. The first permute takes the
+/// words below 32 from the first two vectors; the second keeps those lanes
+/// and takes the rest from the third. Used by the caps' AVX-512 kernel
+/// (`evaluate_indexed`) and the topology's first pass (`count_avx512`).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub(crate) struct TriangleCorners16 {
+    perm: [(std::arch::x86_64::__m512i, std::arch::x86_64::__m512i); 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl TriangleCorners16 {
+    /// The permutes' index vectors.
+    #[target_feature(enable = "avx512f")]
+    pub(crate) fn new() -> Self {
+        use std::arch::x86_64::*;
+        let vector = |f: &dyn Fn(u32) -> u32| -> __m512i {
+            let idx: [u32; 16] = std::array::from_fn(|i| f(i as u32));
+            // SAFETY: 16 u32 are 64 bytes.
+            unsafe { _mm512_loadu_si512(idx.as_ptr().cast()) }
+        };
+        let perm = [0, 1, 2].map(|c| {
+            (
+                vector(&|i| (3 * i + c) & 31),
+                vector(&|i| if 3 * i + c < 32 { i } else { 3 * i + c - 16 }),
+            )
+        });
+        TriangleCorners16 { perm }
+    }
+
+    /// Corner `c` (0, 1 or 2) of the 16 triangles in `v`.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    pub(crate) fn corner(
+        &self,
+        v: &[std::arch::x86_64::__m512i; 3],
+        c: usize,
+    ) -> std::arch::x86_64::__m512i {
+        use std::arch::x86_64::*;
+        let (a, b) = self.perm[c];
+        _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(v[0], a, v[1]), b, v[2])
+    }
+}
+
 /// `dst[a][i] = rows[i][a]` for `a` in x, y, z: [`LANES`] vec4s (anywhere
 /// in memory) transposed into lanes, with AVX2: each vec4 loaded whole and
 /// 4×4 blocks transposed with unpack shuffles (7 shuffles per 8 corners).

@@ -1620,7 +1620,8 @@ unsafe fn emit_range_avx512(
 /// lanes of counters; returns the number of triangles counted.
 ///
 /// Each block is three loads; two permutes of each pair of registers take
-/// out every triangle's first, second and third corner, and each
+/// out every triangle's first, second and third corner
+/// (`evaluate_simd::TriangleCorners16`, as the caps' kernel does), and each
 /// triangle's smallest and middle corner (as in [`sort3`]) and their
 /// ranges come from a min, a max and xors on 16 triangles at once. The
 /// counters' adds stay scalar. Why: the scalar loop spent most of its
@@ -1640,41 +1641,16 @@ unsafe fn emit_range_avx512(
 unsafe fn count_avx512(tris: &[u32], lanes: &mut [u64], ranges: usize) -> usize {
     use std::arch::x86_64::*;
     let blocks = tris.len() / 48;
-    // Corner k of the block's triangle j is word 3j + k of its 48: lane j
-    // of the first permute takes it from the first two registers (words
-    // below 32), lane j of the second keeps that or takes it from the
-    // third.
-    let corner_index = |k: usize| {
-        let (mut first, mut second) = ([0i32; 16], [0i32; 16]);
-        for j in 0..16 {
-            let w = (3 * j + k) as i32;
-            (first[j], second[j]) = if w < 32 { (w, j as i32) } else { (0, w - 16) };
-        }
-        // SAFETY: 16 i32 each.
-        unsafe {
-            (
-                _mm512_loadu_si512(first.as_ptr().cast()),
-                _mm512_loadu_si512(second.as_ptr().cast()),
-            )
-        }
-    };
-    let index = [corner_index(0), corner_index(1), corner_index(2)];
+    let corners = crate::evaluate_simd::TriangleCorners16::new();
     let (mut lo_range, mut mid_range) = ([0u32; 16], [0u32; 16]);
     for b in 0..blocks {
         // SAFETY: block b's 48 words lie inside `tris`.
-        let (w0, w1, w2) = unsafe {
+        let w = unsafe {
             let at = tris.as_ptr().add(48 * b);
             crate::hint::prefetch_stream(at);
-            (
-                _mm512_loadu_si512(at.cast()),
-                _mm512_loadu_si512(at.add(16).cast()),
-                _mm512_loadu_si512(at.add(32).cast()),
-            )
+            [0, 16, 32].map(|k| _mm512_loadu_si512(at.add(k).cast()))
         };
-        let corner = |(first, second): (__m512i, __m512i)| {
-            _mm512_permutex2var_epi32(_mm512_permutex2var_epi32(w0, first, w1), second, w2)
-        };
-        let (x, y, z) = (corner(index[0]), corner(index[1]), corner(index[2]));
+        let [x, y, z] = [0, 1, 2].map(|c| corners.corner(&w, c));
         let lo = _mm512_min_epu32(x, _mm512_min_epu32(y, z));
         let hi = _mm512_max_epu32(x, _mm512_max_epu32(y, z));
         let mid = _mm512_xor_si512(
