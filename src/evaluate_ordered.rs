@@ -93,8 +93,9 @@ struct PackedSlots {
     /// slots read, or [`NOT_PACKED`].
     base: Vec<u32>,
     /// Per slot of every whole block: its signed-table index less the
-    /// block's base (0 in blocks not packed).
-    offsets: Vec<u16>,
+    /// block's base (0 in blocks not packed), 16 bits each, four to a word
+    /// ([`offset`]).
+    offsets: Vec<u64>,
     /// Record ranges the tables do not hold, in order.
     leftovers: Vec<Range<usize>>,
 }
@@ -315,7 +316,7 @@ impl OrderedEvaluation {
         chunks_of(out, CHUNK)
             .into_par_iter()
             .zip(b.base.par_chunks(CHUNK / BLOCK))
-            .zip(b.offsets.par_chunks(CHUNK * k))
+            .zip(b.offsets.par_chunks(CHUNK * k / SLOTS_PER_WORD))
             .for_each(|((out, base), offsets)| {
                 // SAFETY: every packed block's base + offset is below
                 // 2 · len() (`pack`), which is table.len() (asserted).
@@ -345,7 +346,7 @@ impl OrderedEvaluation {
         let k = b.k;
         out.par_chunks_mut(CHUNK)
             .zip(b.base.par_chunks(CHUNK / BLOCK))
-            .zip(b.offsets.par_chunks(CHUNK * k))
+            .zip(b.offsets.par_chunks(CHUNK * k / SLOTS_PER_WORD))
             .for_each(|((out, base), offsets)| {
                 // SAFETY: every packed block's base + offset is below
                 // 2 · len() (`pack`), which is signed.len() (asserted).
@@ -400,7 +401,7 @@ fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
     let per_block = BLOCK * k;
     let (blocks, records) = (tri.len() / per_block, tri.len() / k);
     let mut base = vec![NOT_PACKED; blocks];
-    let mut offsets = vec![0u16; blocks * per_block];
+    let mut offsets = vec![0u64; blocks * per_block / SLOTS_PER_WORD];
     let mut leftovers: Vec<Range<usize>> = Vec::new();
     let mut leave = |r: Range<usize>| match leftovers.last_mut() {
         Some(last) if last.end == r.start => last.end = r.end,
@@ -423,9 +424,12 @@ fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
         match span {
             Some((lo, hi)) if hi - lo <= u16::MAX as u32 => {
                 *base = lo;
-                for ((o, &t), &p) in offsets[at].iter_mut().zip(tri).zip(parity) {
+                let words =
+                    &mut offsets[b * per_block / SLOTS_PER_WORD..][..per_block / SLOTS_PER_WORD];
+                for (i, (&t, &p)) in tri.iter().zip(parity).enumerate() {
                     // Some: every slot of the block was checked just above.
-                    *o = (index(t, p).unwrap() - lo) as u16;
+                    let o = u64::from(index(t, p).unwrap() - lo);
+                    words[i / SLOTS_PER_WORD] |= o << (16 * (i % SLOTS_PER_WORD));
                 }
             }
             _ => leave(b * BLOCK..(b + 1) * BLOCK),
@@ -442,31 +446,61 @@ fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
     }
 }
 
+/// Slots' offsets per `u64` of [`PackedSlots::offsets`]: four records
+/// (`k` slots each) take `k` whole words.
+const SLOTS_PER_WORD: usize = 4;
+
+/// Offset `i` of `words` (a block's, or four records'): 16 bits of word
+/// `i / 4`.
+///
+/// Why words: a record's slots cost a load of the offset and a load of
+/// the byte it names, and with `u16` offsets those loads were most of the
+/// sides' instructions; now one load serves four offsets, and shifts take
+/// them apart. The dragon's whole one-light evaluation, one thread,
+/// fastest of 40 alternated rounds, five alternations of the two binaries
+/// (`cargo run --release --example stage_probe -- evaluate
+/// target/dragon/dragon.glb`, its `auto` row): 2.75–2.86 ms with `u16`
+/// offsets, 2.48–2.61 ms with words; the sides alone 0.84 → 0.71 ms (a
+/// local probe); four lights at once 1.51–1.57 → 1.43–1.53 ms per light
+/// (benches/ROUNDS.md, Thirty-second round).
+#[inline(always)]
+fn offset(words: &[u64], i: usize) -> usize {
+    ((words[i / SLOTS_PER_WORD] >> (16 * (i % SLOTS_PER_WORD))) & 0xFFFF) as usize
+}
+
 /// Every packed block of `base` (records of `k` slots): each record's sum of
 /// its slots' bytes of `signed`. Inlined into each of the callers' arms, so
-/// that a constant `k` unrolls the slot loop.
+/// that a constant `k` unrolls the slot loop and turns [`offset`]'s word
+/// indices and shifts into constants.
 ///
 /// # Safety
 /// For every block whose base is not [`NOT_PACKED`], base + each of its
 /// offsets must be below `signed.len()`.
 #[inline(always)]
-unsafe fn blocks(k: usize, signed: &[i8], base: &[u32], offsets: &[u16], out: &mut [i8]) {
+unsafe fn blocks(k: usize, signed: &[i8], base: &[u32], offsets: &[u64], out: &mut [i8]) {
     for ((out, &b), offsets) in out
         .chunks_exact_mut(BLOCK)
         .zip(base)
-        .zip(offsets.chunks_exact(BLOCK * k))
+        .zip(offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
     {
         if b == NOT_PACKED {
             continue;
         }
         let signed = &signed[b as usize..];
-        for (m, s) in out.iter_mut().zip(offsets.chunks_exact(k)) {
-            let mut sum = 0i8;
-            for &o in s {
-                // SAFETY: the caller's.
-                sum = sum.wrapping_add(unsafe { *signed.get_unchecked(o as usize) });
+        // Four records at a time: `k` whole words.
+        for (m, words) in out
+            .chunks_exact_mut(SLOTS_PER_WORD)
+            .zip(offsets.chunks_exact(k))
+        {
+            for (r, m) in m.iter_mut().enumerate() {
+                let mut sum = 0i8;
+                for j in 0..k {
+                    let o = offset(words, r * k + j);
+                    // SAFETY: the caller's.
+                    sum = sum.wrapping_add(unsafe { *signed.get_unchecked(o) });
+                }
+                *m = sum;
             }
-            *m = sum;
         }
     }
 }
@@ -481,11 +515,14 @@ unsafe fn group_blocks(
     k: usize,
     table: &[u32],
     base: &[u32],
-    offsets: &[u16],
+    offsets: &[u64],
     out: [&mut [i8]; LIGHT_GROUP],
 ) {
     let mut out = out.map(|o| o.chunks_exact_mut(BLOCK));
-    for (&b, offsets) in base.iter().zip(offsets.chunks_exact(BLOCK * k)) {
+    for (&b, offsets) in base
+        .iter()
+        .zip(offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
+    {
         // Some: each output holds a block per base.
         let mut out = out.each_mut().map(|o| o.next().expect("a block per base"));
         if b == NOT_PACKED {
@@ -496,19 +533,26 @@ unsafe fn group_blocks(
         if k <= 127 {
             // Each byte of a sum is (1 + s) summed over k slots: at most
             // 2k ≤ 254, so no carry crosses into the next byte.
-            for (sum, s) in sums.iter_mut().zip(offsets.chunks_exact(k)) {
-                for &o in s {
-                    // SAFETY: the caller's.
-                    *sum = sum.wrapping_add(unsafe { *table.get_unchecked(o as usize) });
+            for (sums, words) in sums
+                .chunks_exact_mut(SLOTS_PER_WORD)
+                .zip(offsets.chunks_exact(k))
+            {
+                for (r, sum) in sums.iter_mut().enumerate() {
+                    for j in 0..k {
+                        let o = offset(words, r * k + j);
+                        // SAFETY: the caller's.
+                        *sum = sum.wrapping_add(unsafe { *table.get_unchecked(o) });
+                    }
                 }
             }
         } else {
             // Bytes summed one by one, as i8 (wrapping), then biased back.
-            for (sum, s) in sums.iter_mut().zip(offsets.chunks_exact(k)) {
+            for (r, sum) in sums.iter_mut().enumerate() {
                 let mut bytes = [0u8; LIGHT_GROUP];
-                for &o in s {
+                for j in 0..k {
+                    let o = offset(offsets, r * k + j);
                     // SAFETY: the caller's.
-                    let e = unsafe { *table.get_unchecked(o as usize) }.to_le_bytes();
+                    let e = unsafe { *table.get_unchecked(o) }.to_le_bytes();
                     for (b, e) in bytes.iter_mut().zip(e) {
                         *b = b.wrapping_add(e);
                     }
