@@ -8,16 +8,19 @@
 #   parsing (weld + topology + layout + write) in ns per triangle, the same
 #   with 2 threads, and the 2-thread speed-ups of both.
 # Prints only; asserts nothing except identical outputs.
+# With SVG=PATH, also draws the same figures as a curve of ns per triangle
+# against triangles into PATH (examples/scaling_svg.rs; docs/scaling.svg is
+# one).
 # Usage: bash benches/scaling.sh [N ...]  (default 10000 100000 1000000
-# 5000000). Honours CARGO_TARGET_DIR and REPS; scenes go to a temp directory
-# removed at exit.
+# 5000000). Honours CARGO_TARGET_DIR, REPS and SVG; scenes go to a temp
+# directory removed at exit.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 counts=("$@")
 [ ${#counts[@]} -gt 0 ] || counts=(10000 100000 1000000 5000000)
 reps="${REPS:-3}"
 target="${CARGO_TARGET_DIR:-target}"
-cargo build --release --quiet --bin svpack --example scene
+cargo build --release --quiet --bin svpack --example scene --example scaling_svg
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
@@ -47,6 +50,7 @@ import sys
 name, n, t1, a1, t2, a2 = sys.argv[1], int(sys.argv[2]), *map(float, sys.argv[3:])
 print(f"| {name} | {n:,} | {t1:.1f} ms | {t1 * 1e6 / n:.0f} | {a1 * 1e6 / n:.0f} | {a2 * 1e6 / n:.0f} | {t1 / t2:.2f}x | {a1 / a2:.2f}x |")' \
     "$1" "$2" "$t1" "$a1" "$t2" "$a2"
+  echo "$1,$2,$t1,$a1,$t2,$a2" >>"$work/rows.csv"
 }
 
 echo "| input | triangles | build, 1 thread | ns/tri | after parsing, ns/tri (1 thread) | after parsing, ns/tri (2 threads) | 2-thread speed-up, whole | 2-thread speed-up, after parsing |"
@@ -58,4 +62,8 @@ for n in "${counts[@]}"; do
 done
 if [ -s target/dragon/dragon.obj ]; then
   row "Stanford dragon" 871414 target/dragon/dragon.obj
+fi
+if [ -n "${SVG:-}" ]; then
+  "$target/release/examples/scaling_svg" "$work/rows.csv" "$SVG"
+  echo "curve: $SVG" >&2
 fi
