@@ -285,9 +285,9 @@ fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
     insertion_sort_into(scratch, a);
 }
 
-/// The runs (welded ids) that no entry of `run` marked [`USED`] names, in
-/// increasing order: `run[v]` is input vertex `v`'s run, marked when a kept
-/// triangle has `v` as a corner.
+/// The runs (welded ids) that no marked vertex is in, in increasing order:
+/// `run[v]` is input vertex `v`'s run, and `marks[v]` is 1 when a kept
+/// triangle has `v` as a corner, else 0.
 ///
 /// Only the run of an unmarked vertex can be unused, and those are few: the
 /// vertices of degenerate triangles, unreferenced ones, and copies of one
@@ -302,27 +302,25 @@ fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
 /// with the scan that finds an unmarked entry (one thread, `RECYCLE=1
 /// cargo run --release --example stage_probe -- weld
 /// target/dragon/dragon.obj`, its `unused` step, three alternations).
-fn unused_runs(run: &mut [std::sync::atomic::AtomicU32], runs: usize) -> Vec<u32> {
+fn unused_runs(run: &mut [std::sync::atomic::AtomicU32], marks: &[u8], runs: usize) -> Vec<u32> {
     let mut maybe = vec![0u64; runs.div_ceil(64)];
     let bit = |r: u32| (r as usize / 64, 1u64 << (r % 64));
-    // Block by block, only those with an unmarked entry walked one by one
-    // (an and of the block's entries, as in `weld`, vectorises).
-    for c in run.chunks_mut(VERTEX_BLOCK) {
-        if c.iter_mut().fold(USED, |all, r| all & *r.get_mut()) != 0 {
+    // Block by block, only those with an unmarked vertex walked one by one
+    // (an and of the block's marks, as in `weld`, vectorises).
+    for (c, m) in run.chunks_mut(VERTEX_BLOCK).zip(marks.chunks(VERTEX_BLOCK)) {
+        if m.iter().fold(1, |all, &m| all & m) != 0 {
             continue;
         }
-        for r in c.iter_mut() {
-            let r = *r.get_mut();
-            if r & USED == 0 {
-                let (w, b) = bit(r);
+        for (r, &m) in c.iter_mut().zip(m) {
+            if m == 0 {
+                let (w, b) = bit(*r.get_mut());
                 maybe[w] |= b;
             }
         }
     }
-    for r in run.iter_mut() {
-        let r = *r.get_mut();
-        if r & USED != 0 {
-            let (w, b) = bit(r & !USED);
+    for (r, &m) in run.iter_mut().zip(marks) {
+        if m != 0 {
+            let (w, b) = bit(*r.get_mut());
             if maybe[w] & b != 0 {
                 maybe[w] &= !b;
             }
@@ -599,11 +597,11 @@ const TRI_BLOCK: usize = 1 << 14;
 /// will write (see `weld_in`, step 2).
 const RUN_AHEAD: usize = 32;
 
-/// Set in `run[v]` once a kept triangle uses vertex v; run ids stay below.
-const USED: u32 = 1 << 31;
+/// Run ids stay below this: at most 2^31 distinct positions.
+const RUN_LIMIT: u32 = 1 << 31;
 
 /// What debug builds fill the uninitialised run ids and triangles with, to
-/// check that every slot is written: run ids stay below [`USED`].
+/// check that every slot is written: run ids stay below [`RUN_LIMIT`].
 const UNWRITTEN: u32 = u32::MAX;
 
 /// Welds the soup `positions`/`indices` (3 indices per triangle, all in range,
@@ -669,7 +667,7 @@ fn weld_in_timed(
     times: &mut StepTimes,
 ) -> Welded {
     use rayon::prelude::*;
-    use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+    use std::sync::atomic::{AtomicU8, AtomicU32, Ordering::Relaxed};
     use std::time::Instant;
     let started = Instant::now();
     let n = positions.len();
@@ -717,7 +715,7 @@ fn weld_in_timed(
     //    its own offset, in parallel.
     let runs: usize = groups.iter().map(|g| g.1).sum();
     assert!(
-        runs < USED as usize,
+        runs < RUN_LIMIT as usize,
         "weld: 2^31 distinct positions or more"
     );
     // Both uninitialised, for the same reason as the triangles: each run
@@ -795,14 +793,28 @@ fn weld_in_timed(
 
     // 3. Triangles in run ids, in place, in fixed blocks in parallel; the
     //    degenerate ones are listed (they are rare) and closed up after.
-    //    Every corner of a kept triangle marks its vertex USED, in the entry
-    //    of `run` it has just read; a mark is only ever set, so the result
-    //    is the same in any order.
+    //    Every corner of a kept triangle marks its vertex, a byte of
+    //    `marks`; a mark is only ever set, so the result is the same in any
+    //    order.
+    //
+    //    Until the thirty-second round the mark was a bit of the vertex's
+    //    entry of `run`, stored back into the entry the corner had just
+    //    read: every line of `run` (4 bytes a vertex) was then dirty and
+    //    went back to memory, and the renaming masked the bit off each run
+    //    id. With a byte per vertex, `run` is only read here. One thread,
+    //    `RECYCLE=1 cargo run --release --example stage_probe -- weld FILE`,
+    //    three alternations: the dragon's step 3.30–3.33 → 2.82–2.96 ms
+    //    (the glTF; its OBJ 3.22–3.40 → 2.83–3.17), the 5M scene's
+    //    15.8–15.9 → 15.0–15.1 ms (two); with two threads, the dragon's
+    //    1.66–1.67 → 1.41–1.42 ms.
+    let mut marks: Vec<u8> = crate::alloc::zeroed_large(n);
+    let marks_at = SharedSlots(marks.as_mut_ptr());
     let dropped: Vec<Vec<u32>> = indices
         .par_chunks(3 * TRI_BLOCK)
         .zip(triangles.spare_capacity_mut()[..3 * triangle_count].par_chunks_mut(3 * TRI_BLOCK))
         .enumerate()
         .map(|(blk, (block, out))| {
+            let marks_at = &marks_at;
             let mut dropped = Vec::new();
             for (i, (c, o)) in block
                 .chunks_exact(3)
@@ -815,11 +827,14 @@ fn weld_in_timed(
                     run[c[1] as usize].load(Relaxed),
                     run[c[2] as usize].load(Relaxed),
                 ];
-                let (a, b, d) = (r[0] & !USED, r[1] & !USED, r[2] & !USED);
+                let [a, b, d] = r;
                 o.copy_from_slice(&[a, b, d].map(MaybeUninit::new));
                 if a != b && b != d && a != d {
-                    for (&v, &r) in c.iter().zip(&r) {
-                        run[v as usize].store(r | USED, Relaxed);
+                    for &v in c {
+                        // SAFETY: v < n (indices are in range), and a
+                        // `u8` is an `AtomicU8`'s layout: the threads
+                        // only ever store 1, atomically.
+                        unsafe { AtomicU8::from_ptr(marks_at.0.add(v as usize)) }.store(1, Relaxed);
                     }
                 } else {
                     dropped.push((blk * TRI_BLOCK + i) as u32);
@@ -855,16 +870,14 @@ fn weld_in_timed(
 
     // 4. Drop unused runs (those no kept triangle references) and renumber
     //    densely; the order stays lexicographic. Usually every vertex is
-    //    marked, which one scan shows: an and of every entry per block,
-    //    through `get_mut` (plain loads, which vectorise; atomic loads do
-    //    not): the 5M scene's 2.5–2.6 → 0.9–1.0 ms, the dragon's 0.27–0.30
-    //    → 0.12–0.13 ms (one thread, `RECYCLE=1 cargo run --release
-    //    --example stage_probe -- weld`, three alternations).
-    if !run
-        .par_chunks_mut(VERTEX_BLOCK)
-        .all(|c| c.iter_mut().fold(USED, |all, r| all & *r.get_mut()) != 0)
+    //    marked, which one scan shows: an and of every mark per block,
+    //    which vectorises (on the 5M scene 0.4 ms while the marks were
+    //    bits of `run`, 0.1 ms as bytes).
+    if !marks
+        .par_chunks(VERTEX_BLOCK)
+        .all(|c| c.iter().fold(1, |all, &m| all & m) != 0)
     {
-        let unused = unused_runs(&mut run, runs);
+        let unused = unused_runs(&mut run, &marks, runs);
         if !unused.is_empty() {
             let mut rank = vec![u32::MAX; runs];
             let mut kept = 0;
