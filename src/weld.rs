@@ -298,8 +298,9 @@ fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
 /// as bits, and one pass over the marked entries clears the candidates
 /// they name, with a load and a test per entry. Until the thirty-second
 /// round every entry set its run's flag in an array of a flag per run, and
-/// then every run was copied: that OBJ's step 0.79–0.86 ms, now 0.40–0.43
-/// with the scan that finds an unmarked entry (one thread, `RECYCLE=1
+/// then every run was copied: that OBJ's step 0.79–0.86 ms, 0.40–0.43
+/// after (the marks still bits of `run` then; with the scan that finds
+/// an unmarked entry; one thread, `RECYCLE=1
 /// cargo run --release --example stage_probe -- weld
 /// target/dragon/dragon.obj`, its `unused` step, three alternations).
 fn unused_runs(run: &mut [std::sync::atomic::AtomicU32], marks: &[u8], runs: usize) -> Vec<u32> {
