@@ -303,25 +303,25 @@ fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
 /// an unmarked entry; one thread, `RECYCLE=1
 /// cargo run --release --example stage_probe -- weld
 /// target/dragon/dragon.obj`, its `unused` step, three alternations).
-fn unused_runs(run: &mut [std::sync::atomic::AtomicU32], marks: &[u8], runs: usize) -> Vec<u32> {
+fn unused_runs(run: &[u32], marks: &[u8], runs: usize) -> Vec<u32> {
     let mut maybe = vec![0u64; runs.div_ceil(64)];
     let bit = |r: u32| (r as usize / 64, 1u64 << (r % 64));
     // Block by block, only those with an unmarked vertex walked one by one
     // (an and of the block's marks, as in `weld`, vectorises).
-    for (c, m) in run.chunks_mut(VERTEX_BLOCK).zip(marks.chunks(VERTEX_BLOCK)) {
-        if m.iter().fold(1, |all, &m| all & m) != 0 {
+    for (c, m) in run.chunks(VERTEX_BLOCK).zip(marks.chunks(VERTEX_BLOCK)) {
+        if all_marked(m) {
             continue;
         }
-        for (r, &m) in c.iter_mut().zip(m) {
+        for (&r, &m) in c.iter().zip(m) {
             if m == 0 {
-                let (w, b) = bit(*r.get_mut());
+                let (w, b) = bit(r);
                 maybe[w] |= b;
             }
         }
     }
-    for (r, &m) in run.iter_mut().zip(marks) {
+    for (&r, &m) in run.iter().zip(marks) {
         if m != 0 {
-            let (w, b) = bit(*r.get_mut());
+            let (w, b) = bit(r);
             if maybe[w] & b != 0 {
                 maybe[w] &= !b;
             }
@@ -336,6 +336,12 @@ fn unused_runs(run: &mut [std::sync::atomic::AtomicU32], marks: &[u8], runs: usi
         }
     }
     unused
+}
+
+/// Whether every byte of `marks` (each 0 or 1) is 1: an and of them all,
+/// which vectorises.
+fn all_marked(marks: &[u8]) -> bool {
+    marks.iter().fold(1, |all, &m| all & m) != 0
 }
 
 /// Number of distinct keys in sorted words.
@@ -668,7 +674,7 @@ fn weld_in_timed(
     times: &mut StepTimes,
 ) -> Welded {
     use rayon::prelude::*;
-    use std::sync::atomic::{AtomicU8, AtomicU32, Ordering::Relaxed};
+    use std::sync::atomic::{AtomicU8, Ordering::Relaxed};
     use std::time::Instant;
     let started = Instant::now();
     let n = positions.len();
@@ -722,10 +728,10 @@ fn weld_in_timed(
     // Both uninitialised, for the same reason as the triangles: each run
     // writes its position, and each input vertex is in one word.
     // (Rounded up to a large block: see `alloc::large_capacity`.)
-    let mut run: Vec<AtomicU32> = Vec::with_capacity(crate::alloc::large_capacity::<AtomicU32>(n));
+    let mut run: Vec<u32> = Vec::with_capacity(crate::alloc::large_capacity::<u32>(n));
     if cfg!(debug_assertions) {
         for r in run.spare_capacity_mut() {
-            r.write(AtomicU32::new(UNWRITTEN));
+            r.write(UNWRITTEN);
         }
     }
     let run_at = SharedSlots(run.as_mut_ptr());
@@ -772,12 +778,7 @@ fn weld_in_timed(
                 // SAFETY: the word's vertex index is below n, and no other
                 // word has it (one word per input vertex), so no other job
                 // writes this slot.
-                unsafe {
-                    run_at
-                        .0
-                        .add(w as u32 as usize)
-                        .write(AtomicU32::new(first_run + r as u32))
-                };
+                unsafe { run_at.0.add(w as u32 as usize).write(first_run + r as u32) };
             }
         });
     drop(groups);
@@ -788,7 +789,7 @@ fn weld_in_timed(
         out_positions.set_len(runs);
         run.set_len(n);
     }
-    debug_assert!(run.iter().all(|r| r.load(Relaxed) != UNWRITTEN));
+    debug_assert!(!run.contains(&UNWRITTEN));
     times.numbering = step.elapsed();
     let step = Instant::now();
 
@@ -823,12 +824,7 @@ fn weld_in_timed(
                 .enumerate()
             {
                 crate::hint::prefetch_stream(block.as_ptr().wrapping_add(3 * i));
-                let r = [
-                    run[c[0] as usize].load(Relaxed),
-                    run[c[1] as usize].load(Relaxed),
-                    run[c[2] as usize].load(Relaxed),
-                ];
-                let [a, b, d] = r;
+                let [a, b, d] = [run[c[0] as usize], run[c[1] as usize], run[c[2] as usize]];
                 o.copy_from_slice(&[a, b, d].map(MaybeUninit::new));
                 if a != b && b != d && a != d {
                     for &v in c {
@@ -874,11 +870,8 @@ fn weld_in_timed(
     //    marked, which one scan shows: an and of every mark per block,
     //    which vectorises (on the 5M scene 0.4 ms while the marks were
     //    bits of `run`, 0.1 ms as bytes).
-    if !marks
-        .par_chunks(VERTEX_BLOCK)
-        .all(|c| c.iter().fold(1, |all, &m| all & m) != 0)
-    {
-        let unused = unused_runs(&mut run, &marks, runs);
+    if !marks.par_chunks(VERTEX_BLOCK).all(all_marked) {
+        let unused = unused_runs(&run, &marks, runs);
         if !unused.is_empty() {
             let mut rank = vec![u32::MAX; runs];
             let mut kept = 0;
