@@ -10,6 +10,7 @@
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld and its steps, memory recycled, and std's sort of its words
 //! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
 //! cargo run --release --example stage_probe -- buckets MODEL # weld + topology + bucket counts (the stages bench's `ours_buckets`), then meshoptimizer's adjacency, with their page faults
+//! cargo run --release --example stage_probe -- floor MODEL   # `buckets` with fresh and with recycled memory, and the fresh pages of its output alone, alternated: the fresh-memory floor
 //! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
 //! cargo run --release --example stage_probe -- verify FILE.svpk  # orientation errors, 12 point lights
 //! cargo run --release --example stage_probe -- evaluate MODEL  # the evaluator's caps and caps + sides, each kernel choice, alternated
@@ -71,7 +72,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [what, file] = &args[..] else {
         eprintln!(
-            "usage: stage_probe read|build|weld|passes|buckets|fill-write|verify|evaluate|replace FILE"
+            "usage: stage_probe read|build|weld|passes|buckets|floor|fill-write|verify|evaluate|replace FILE"
         );
         std::process::exit(1);
     };
@@ -92,13 +93,14 @@ fn main() {
         "weld" => weld_recycled(path),
         "passes" => passes(path),
         "buckets" => buckets(path),
+        "floor" => floor(path),
         "fill-write" => fill_write(path),
         "verify" => verify(path),
         "evaluate" => evaluate(path),
         "replace" => replace(path),
         _ => {
             eprintln!(
-                "unknown step {what:?}: read, build, weld, passes, buckets, fill-write, verify, evaluate or replace"
+                "unknown step {what:?}: read, build, weld, passes, buckets, floor, fill-write, verify, evaluate or replace"
             );
             std::process::exit(1);
         }
@@ -601,6 +603,93 @@ fn buckets(path: &Path) {
     runs("meshoptimizer's adjacency", 10, &|| {
         std::hint::black_box(peers::meshopt_adjacency(&soup.positions, &soup.indices));
     });
+}
+
+/// The floor that fresh memory puts under `buckets`' runs (the stages
+/// bench's `ours_buckets`, whose every iteration maps its blocks afresh):
+/// per round, one run with fresh memory, one with memory recycled (a
+/// `KeepFreed` guard held over a run before it, which fills the cache),
+/// meshoptimizer's adjacency, and the fresh pages of our run's output
+/// alone: buffers of the returned arrays' sizes allocated the same way,
+/// one byte written per 4 KiB page, then freed. 20 rounds alternated (the
+/// host drifts). Recycled plus the output's pages is what a run with
+/// fresh memory takes at least, whatever the code does short of returning
+/// less: the kernel maps and zeroes every page of it. Ignores `RECYCLE`.
+fn floor(path: &Path) {
+    let soup = svpack::load::load(path).unwrap();
+    let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+    // The returned arrays' sizes in bytes (capacities: what was mapped).
+    let sizes: Vec<usize> = {
+        let (w, e, _, _) = peers::ours_buckets(&soup);
+        vec![
+            w.positions.capacity() * 12,
+            w.triangles.capacity() * 4,
+            e.a.capacity() * 4,
+            e.b.capacity() * 4,
+            e.opp_start.capacity() * 4,
+            e.opp.capacity() * 4,
+        ]
+    };
+    let output: usize = sizes.iter().sum();
+    let (mut fresh, mut recycled, mut peer, mut pages) = (vec![], vec![], vec![], vec![]);
+    for _ in 0..20 {
+        let t = Instant::now();
+        std::hint::black_box(peers::ours_buckets(&soup));
+        fresh.push(ms(t));
+        {
+            let _keep = svpack::alloc::KeepFreed::new();
+            std::hint::black_box(peers::ours_buckets(&soup));
+            let t = Instant::now();
+            std::hint::black_box(peers::ours_buckets(&soup));
+            recycled.push(ms(t));
+        }
+        let t = Instant::now();
+        std::hint::black_box(peers::meshopt_adjacency(&soup.positions, &soup.indices));
+        peer.push(ms(t));
+        let t = Instant::now();
+        for &n in &sizes {
+            let mut v: Vec<u8> = Vec::with_capacity(n);
+            // SAFETY: within the capacity; one byte per page, as a first
+            // write does.
+            for at in (0..n).step_by(4096) {
+                unsafe { v.as_mut_ptr().add(at).write_volatile(1) };
+            }
+            std::hint::black_box(&v);
+        }
+        pages.push(ms(t));
+    }
+    let stats = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        (v[0], v[v.len() / 2])
+    };
+    let (f, r, p, g) = (
+        stats(&mut fresh),
+        stats(&mut recycled),
+        stats(&mut peer),
+        stats(&mut pages),
+    );
+    println!("fastest / median of 20 alternated rounds, ms:");
+    println!(
+        "  weld + topology + buckets, fresh memory: {:.2} / {:.2}",
+        f.0, f.1
+    );
+    println!("  the same, memory recycled: {:.2} / {:.2}", r.0, r.1);
+    println!(
+        "  the fresh pages of its output alone ({:.1} MiB): {:.2} / {:.2}",
+        output as f64 / (1 << 20) as f64,
+        g.0,
+        g.1
+    );
+    println!("  meshoptimizer's adjacency: {:.2} / {:.2}", p.0, p.1);
+    println!(
+        "floor with fresh memory (recycled + the output's pages): {:.2} / {:.2} ms = {:.3} / {:.3} of meshoptimizer; fresh memory measured {:.3} / {:.3}",
+        r.0 + g.0,
+        r.1 + g.1,
+        (r.0 + g.0) / p.0,
+        (r.1 + g.1) / p.1,
+        f.0 / p.0,
+        f.1 / p.1
+    );
 }
 
 /// What putting a finished 120 MiB output in place costs in directory
