@@ -205,7 +205,19 @@ pub fn build_soup(soup: &Soup, max_mult: u32) -> Built {
 
 /// [`build_soup`], adding each stage's wall time to `t` and announcing each
 /// stage to `stage` as it starts.
+///
+/// The stages run as one job on rayon's pool (see `crate::pool`).
 pub fn build_soup_timed(
+    soup: &Soup,
+    max_mult: u32,
+    t: &mut Timings,
+    stage: StageCallback<'_>,
+) -> Built {
+    crate::pool::one_job(|| build_soup_stages(soup, max_mult, t, stage))
+}
+
+/// The stages of [`build_soup_timed`].
+fn build_soup_stages(
     soup: &Soup,
     max_mult: u32,
     t: &mut Timings,
@@ -358,7 +370,20 @@ pub fn build_file(input: &Path, output: &Path, cfg: &BuildConfig) -> Result<Buil
 
 /// [`build_file`], announcing each stage ("load", "weld", "topology",
 /// "layout", "write") to `stage` as it starts (for progress display).
+///
+/// The build runs as one job on rayon's pool (see `crate::pool`), as the
+/// command line's builds do (`build_batch_with` runs them on its pool).
 pub fn build_file_with(
+    input: &Path,
+    output: &Path,
+    cfg: &BuildConfig,
+    stage: StageCallback<'_>,
+) -> Result<BuildOutput> {
+    crate::pool::one_job(|| build_file_stages(input, output, cfg, stage))
+}
+
+/// The stages of [`build_file_with`].
+fn build_file_stages(
     input: &Path,
     output: &Path,
     cfg: &BuildConfig,

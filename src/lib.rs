@@ -18,6 +18,7 @@ pub mod layout;
 pub mod lint;
 pub mod load;
 pub mod multiplicity;
+mod pool;
 mod position_index;
 pub mod quantize;
 pub mod removals;

@@ -227,8 +227,23 @@ fn chunks_for(triangles: &[u32]) -> usize {
 /// [`build_edges`] (with `opp_tri` when `TRI`) with the triangles cut into
 /// `chunks` chunks for the count and list passes (tests use it to vary the
 /// cut), pass 3's AVX-512 kernel when `simd` (the CPU must have it; tests
-/// run both), and the passes' times.
+/// run both), and the passes' times: [`edge_passes`] as one job on rayon's
+/// pool (see `crate::pool`).
 fn build_edges_in<const TRI: bool>(
+    triangles: &[u32],
+    vertex_count: usize,
+    chunks: usize,
+    simd: bool,
+    wide: bool,
+    consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
+) -> (Edges, PassTimes) {
+    crate::pool::one_job(|| {
+        edge_passes::<TRI>(triangles, vertex_count, chunks, simd, wide, consumer)
+    })
+}
+
+/// The passes of [`build_edges_in`].
+fn edge_passes<const TRI: bool>(
     triangles: &[u32],
     vertex_count: usize,
     chunks: usize,

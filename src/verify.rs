@@ -476,7 +476,15 @@ pub fn evaluate(d: &Decoded, light: Light, strategy: Strategy) -> Evaluation {
 /// file those are megabytes of pages the kernel must map and zero on first
 /// touch, which cost about as much as the evaluation itself (benches/evaluate.rs,
 /// `caps+sides/reference_shared` against `…_fresh`).
+///
+/// Its passes run as one job on rayon's pool (see `crate::pool`): one wait
+/// for a pool thread per call from outside the pool, not one per pass.
 pub fn evaluate_into(d: &Decoded, light: Light, strategy: Strategy, ev: &mut Evaluation) {
+    crate::pool::one_job(|| evaluate_passes(d, light, strategy, ev))
+}
+
+/// The passes of [`evaluate_into`].
+fn evaluate_passes(d: &Decoded, light: Light, strategy: Strategy, ev: &mut Evaluation) {
     if strategy == Strategy::Kim {
         return evaluate_sides(d, light, strategy, ev, |b, _, m| {
             side_multiplicities_with(strategy, b.k, &b.data, light, m)
@@ -538,7 +546,7 @@ fn evaluate_ordered(d: &Decoded, o: &OrderedEvaluation, light: Light, ev: &mut E
 /// its lights one by one: there the evaluation is 2–3% of a light's
 /// checks, and in groups it measured the same time for 26 MiB more peak
 /// memory on the dragon (four evaluations and the group's table per
-/// worker).
+/// worker). As one job on rayon's pool, as [`evaluate_into`].
 pub fn evaluate_many_into(
     d: &Decoded,
     lights: &[Light],
@@ -546,6 +554,11 @@ pub fn evaluate_many_into(
     evs: &mut [Evaluation],
 ) {
     assert_eq!(lights.len(), evs.len(), "one evaluation per light");
+    crate::pool::one_job(|| evaluate_many_passes(d, lights, strategy, evs))
+}
+
+/// The passes of [`evaluate_many_into`].
+fn evaluate_many_passes(d: &Decoded, lights: &[Light], strategy: Strategy, evs: &mut [Evaluation]) {
     let Some(o) = d
         .ordered
         .as_ref()

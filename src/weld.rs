@@ -666,8 +666,20 @@ fn weld_in(positions: &[[f32; 3]], indices: &[u32], sources: bool) -> Welded {
     weld_in_timed(positions, indices, sources, &mut StepTimes::default())
 }
 
-/// [`weld_in`], its steps' times in `times`.
+/// [`weld_in`], its steps' times in `times`: [`weld_passes`] as one job on
+/// rayon's pool (see `crate::pool`).
 fn weld_in_timed(
+    positions: &[[f32; 3]],
+    indices: &[u32],
+    sources: bool,
+    times: &mut StepTimes,
+) -> Welded {
+    crate::pool::one_job(|| weld_passes(positions, indices, sources, times))
+}
+
+/// The steps of [`weld`] (with [`Welded::source_triangle`] only when
+/// `sources`), their times in `times`.
+fn weld_passes(
     positions: &[[f32; 3]],
     indices: &[u32],
     sources: bool,
