@@ -36,7 +36,9 @@ What it runs (the README's "Performance" section explains each target):
   per-round overheads with 1 and with 2 threads.
 
 After the targets, a second table gives each input's stages (fastest /
-median, ms) with 1 and 2 threads. Time growing linearly with the
+median, ms) with 1 and 2 threads, and (unless `--no-criterion`)
+`stage_probe -- floor`'s lines: the first target's runs with fresh and
+with recycled memory, and the fresh pages of their output alone. Time growing linearly with the
 triangle count is `bash benches/scaling.sh`'s table, not measured here.
 
 `--no-criterion` skips the last two (they compile the benches: minutes on
@@ -213,9 +215,9 @@ def main():
         ratio = ours / peer
         # Met on the fresh-memory figure; the kept one is shown beside it.
         row("weld + topology + buckets ≤ 1/10 of meshopt's adjacency, one thread (dragon)",
-            f"{ours / 1e6:.1f} ms against {peer / 1e6:.1f} ms: **{ratio:.2f}**; with freed "
+            f"{ours / 1e6:.1f} ms against {peer / 1e6:.1f} ms: **{ratio:.3f}**; with freed "
             f"memory kept between runs, as meshoptimizer's malloc keeps most of its own: "
-            f"{kept / 1e6:.1f} ms, {kept / peer:.2f}",
+            f"{kept / 1e6:.1f} ms, {kept / peer:.3f}",
             "yes" if ratio <= 0.1 else ("with memory kept" if kept / peer <= 0.1 else "no"))
     for name, times, _, sizes, _ in results:
         n = sizes["triangles"]
@@ -260,6 +262,21 @@ def main():
             cells = [f"{min(v):.1f} / {statistics.median(v):.1f}"
                      for v in [times[t]] + [[s[i] for s in stages[t]] for i in range(3)]]
             print(f"| {name} | {t} | " + " | ".join(cells) + " |")
+    if not no_criterion:
+        # What fresh memory costs the first target at least: the same runs
+        # with memory recycled, plus the fresh pages of their output alone
+        # (`examples/stage_probe.rs`, `floor`).
+        print("the fresh-memory floor (stage_probe floor)", file=sys.stderr)
+        run(["cargo", "build", "--release", "--quiet", "--example", "stage_probe"])
+        r = run([os.path.join(ROOT, "target", "release", "examples", "stage_probe"), "floor",
+                 DRAGON], capture_output=True, text=True)
+        print()
+        print("The fresh-memory floor under the first target (`cargo run --release --example "
+              "stage_probe -- floor target/dragon/dragon.glb`, one thread):")
+        print()
+        print("```text")
+        print(r.stdout.rstrip())
+        print("```")
 
 if __name__ == "__main__":
     main()
