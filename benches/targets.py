@@ -38,8 +38,9 @@ What it runs (the README's "Performance" section explains each target):
 After the targets, a second table gives each input's stages (fastest /
 median, ms) with 1 and 2 threads, and (unless `--no-criterion`)
 `stage_probe -- floor`'s lines: the first target's runs with fresh and
-with recycled memory, and the fresh pages of their output alone. Time growing linearly with the
-triangle count is `bash benches/scaling.sh`'s table, not measured here.
+with recycled memory, and the fresh pages of their output alone. Time
+growing linearly with the triangle count is `bash benches/scaling.sh`'s
+table, not measured here.
 
 `--no-criterion` skips the last two (they compile the benches: minutes on
 a fresh checkout). The binary is `target/release/svpack`, built first,
