@@ -640,8 +640,14 @@ pub fn layout(welded: &Welded, edges: &Edges, max_mult: u32) -> Layout {
     )
 }
 
-/// [`layout`] from a plan made for these edges and triangles.
+/// [`layout`] from a plan made for these edges and triangles. Its passes
+/// run as one job on rayon's pool (see `crate::pool`).
 pub fn layout_planned(welded: &Welded, edges: &Edges, plan: &Plan) -> Layout {
+    crate::pool::one_job(|| fill_planned(welded, edges, plan))
+}
+
+/// The passes of [`layout_planned`].
+fn fill_planned(welded: &Welded, edges: &Edges, plan: &Plan) -> Layout {
     use rayon::prelude::*;
     let k_max = plan.max_mult as usize;
     let counts = &plan.counts;

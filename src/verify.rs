@@ -111,8 +111,14 @@ fn bits(p: [f32; 3]) -> [u32; 3] {
 /// ([`Decoded::positions`]); every sides position is then looked up in the
 /// same table, and every opposite slot's corner set in the caps triangles
 /// listed by smallest corner. Each step is in fixed blocks or sequential,
-/// so the result does not depend on the number of threads.
+/// so the result does not depend on the number of threads. The steps run
+/// as one job on rayon's pool (see `crate::pool`).
 pub fn decode(file: &SvpkFile, index: usize) -> Decoded {
+    crate::pool::one_job(|| decode_steps(file, index))
+}
+
+/// The steps of [`decode`].
+fn decode_steps(file: &SvpkFile, index: usize) -> Decoded {
     let m = &file.header.meshes[index];
     let caps_data = file.floats(m.caps.offset, m.caps.length);
     let key = |d: &[f32], i: usize| bits([d[4 * i], d[4 * i + 1], d[4 * i + 2]]);
