@@ -134,15 +134,17 @@ impl Edges {
 ///
 /// The result does not depend on the number of threads.
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<true>(
-        triangles,
-        vertex_count,
-        chunks_for(triangles),
-        false,
-        false,
-        None,
-    )
-    .0
+    crate::pool::one_job(|| {
+        build_edges_in::<true>(
+            triangles,
+            vertex_count,
+            chunks_for(triangles),
+            false,
+            false,
+            None,
+        )
+        .0
+    })
 }
 
 /// [`build_edges`] without `opp_tri` (left empty): what a build needs, since
@@ -151,15 +153,7 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
 /// triangle) pair (60 MB on a 5M-triangle scene), all of it fresh pages,
 /// and one write per record less.
 pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edges {
-    build_edges_in::<false>(
-        triangles,
-        vertex_count,
-        chunks_for(triangles),
-        simd_available(),
-        false,
-        None,
-    )
-    .0
+    opposites_only(triangles, vertex_count, None).0
 }
 
 /// [`build_edges_opposites_only`], with `consumer` reading the edges while
@@ -175,15 +169,7 @@ pub fn build_edges_opposites_only_fed(
     vertex_count: usize,
     consumer: &mut (dyn FnMut(&EmitFeed) + Send),
 ) -> Edges {
-    build_edges_in::<false>(
-        triangles,
-        vertex_count,
-        chunks_for(triangles),
-        simd_available(),
-        false,
-        Some(consumer),
-    )
-    .0
+    opposites_only(triangles, vertex_count, Some(consumer)).0
 }
 
 /// [`build_edges_opposites_only`], with the wall time of each of its four
@@ -192,14 +178,26 @@ pub fn build_edges_opposites_only_timed(
     triangles: &[u32],
     vertex_count: usize,
 ) -> (Edges, PassTimes) {
-    build_edges_in::<false>(
-        triangles,
-        vertex_count,
-        chunks_for(triangles),
-        simd_available(),
-        false,
-        None,
-    )
+    opposites_only(triangles, vertex_count, None)
+}
+
+/// The opposites-only edges with their passes' times, as one job on
+/// rayon's pool (see `crate::pool`).
+fn opposites_only(
+    triangles: &[u32],
+    vertex_count: usize,
+    consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
+) -> (Edges, PassTimes) {
+    crate::pool::one_job(|| {
+        build_edges_in::<false>(
+            triangles,
+            vertex_count,
+            chunks_for(triangles),
+            simd_available(),
+            false,
+            consumer,
+        )
+    })
 }
 
 /// Wall time of each pass of [`build_edges`] (see there for the passes).
@@ -227,23 +225,9 @@ fn chunks_for(triangles: &[u32]) -> usize {
 /// [`build_edges`] (with `opp_tri` when `TRI`) with the triangles cut into
 /// `chunks` chunks for the count and list passes (tests use it to vary the
 /// cut), pass 3's AVX-512 kernel when `simd` (the CPU must have it; tests
-/// run both), and the passes' times: [`edge_passes`] as one job on rayon's
-/// pool (see `crate::pool`).
+/// run both), and the passes' times. The public entry points run it as one
+/// job on rayon's pool (see `crate::pool`).
 fn build_edges_in<const TRI: bool>(
-    triangles: &[u32],
-    vertex_count: usize,
-    chunks: usize,
-    simd: bool,
-    wide: bool,
-    consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
-) -> (Edges, PassTimes) {
-    crate::pool::one_job(|| {
-        edge_passes::<TRI>(triangles, vertex_count, chunks, simd, wide, consumer)
-    })
-}
-
-/// The passes of [`build_edges_in`].
-fn edge_passes<const TRI: bool>(
     triangles: &[u32],
     vertex_count: usize,
     chunks: usize,
