@@ -634,7 +634,8 @@ struct SharedSlots<T>(*mut T);
 // SAFETY: shared only to write disjoint slots (see its uses).
 unsafe impl<T> Sync for SharedSlots<T> {}
 
-/// Triangles per parallel block of the degenerate filter.
+/// Fewest triangles per part of the renaming (step 3 of [`weld_passes`]):
+/// smaller inputs take fewer parts than threads.
 const TRI_BLOCK: usize = 1 << 14;
 
 /// How many words ahead the numbering prefetches the run id slot it
@@ -842,9 +843,9 @@ fn weld_passes(
     times.numbering = step.elapsed();
     let step = Instant::now();
 
-    // 3. Triangles in run ids, in place, in fixed blocks in parallel; the
-    //    degenerate ones are listed (they are rare) and closed up after.
-    //    Every corner of a kept triangle marks its vertex, a byte of
+    // 3. Triangles in run ids, one part of the input per thread; the
+    //    degenerate ones are listed (they are rare) and closed up as the
+    //    part goes. Every corner of a kept triangle marks its vertex, a byte of
     //    `marks`; a mark is only ever set, so the result is the same in any
     //    order.
     //
@@ -860,21 +861,36 @@ fn weld_passes(
     //    1.66–1.67 → 1.41–1.42 ms.
     let mut marks: Vec<u8> = crate::alloc::zeroed_large(n);
     let marks_at = SharedSlots(marks.as_mut_ptr());
-    let dropped: Vec<Vec<u32>> = indices
-        .par_chunks(3 * TRI_BLOCK)
-        .zip(triangles.spare_capacity_mut()[..3 * triangle_count].par_chunks_mut(3 * TRI_BLOCK))
+    // Each part renames its triangles in order and writes them closed up
+    // from the part's start (a dropped triangle's slot takes the next kept
+    // one); then each part after the first moves down to follow the kept
+    // triangles before it, so with one thread nothing moves. The result
+    // is the same for any number of parts.
+    //
+    // Until the thirty-fourth round fixed blocks of `TRI_BLOCK` triangles
+    // were renamed in parallel, each in place, and then closed up: with a
+    // triangle dropped near the front that moved nearly every triangle,
+    // one thread or two (the dragon drops 108, the first at 14,955). The
+    // dragon's step, `RECYCLE=1 RAYON_NUM_THREADS=T cargo run --release
+    // --example stage_probe -- weld target/dragon/dragon.glb`, five
+    // alternations: one thread 2.90–3.19 → 2.31–2.54 ms, two threads
+    // 1.45–1.77 → 1.39–1.43 ms.
+    let parts = rayon::current_num_threads().clamp(1, triangle_count.div_ceil(TRI_BLOCK).max(1));
+    let part_len = triangle_count.div_ceil(parts).max(1);
+    let out = &mut triangles.spare_capacity_mut()[..3 * triangle_count];
+    let renamed: Vec<(usize, Vec<u32>)> = indices
+        .par_chunks(3 * part_len)
+        .zip(out.par_chunks_mut(3 * part_len))
         .enumerate()
-        .map(|(blk, (block, out))| {
+        .map(|(part, (tris, out))| {
             let marks_at = &marks_at;
-            let mut dropped = Vec::new();
-            for (i, (c, o)) in block
-                .chunks_exact(3)
-                .zip(out.chunks_exact_mut(3))
-                .enumerate()
-            {
-                crate::hint::prefetch_stream(block.as_ptr().wrapping_add(3 * i));
+            let first = part * part_len;
+            let (mut kept, mut dropped) = (0, Vec::new());
+            for (i, c) in tris.chunks_exact(3).enumerate() {
+                crate::hint::prefetch_stream(tris.as_ptr().wrapping_add(3 * i));
                 let [a, b, d] = [run[c[0] as usize], run[c[1] as usize], run[c[2] as usize]];
-                o.copy_from_slice(&[a, b, d].map(MaybeUninit::new));
+                // (kept <= i: inside the part's slots.)
+                out[3 * kept..3 * kept + 3].copy_from_slice(&[a, b, d].map(MaybeUninit::new));
                 if a != b && b != d && a != d {
                     for &v in c {
                         // SAFETY: v < n (indices are in range), and a
@@ -882,20 +898,28 @@ fn weld_passes(
                         // only ever store 1, atomically.
                         unsafe { AtomicU8::from_ptr(marks_at.0.add(v as usize)) }.store(1, Relaxed);
                     }
+                    kept += 1;
                 } else {
-                    dropped.push((blk * TRI_BLOCK + i) as u32);
+                    dropped.push((first + i) as u32);
                 }
             }
-            dropped
+            (kept, dropped)
         })
         .collect();
-    // SAFETY: the blocks wrote all 3 · triangle_count slots.
-    unsafe { triangles.set_len(3 * triangle_count) };
+    let mut kept_triangles = 0;
+    for (part, &(kept, _)) in renamed.iter().enumerate() {
+        let from = part * part_len;
+        if from != kept_triangles {
+            out.copy_within(3 * from..3 * (from + kept), 3 * kept_triangles);
+        }
+        kept_triangles += kept;
+    }
+    // SAFETY: the parts wrote their kept triangles, now the first
+    // `kept_triangles` in order.
+    unsafe { triangles.set_len(3 * kept_triangles) };
     debug_assert!(!triangles.contains(&UNWRITTEN));
-    let degenerate = dropped.iter().map(Vec::len).sum::<usize>() as u64;
-    let kept_triangles = triangle_count - degenerate as usize;
-    close_up_blocks(&mut triangles, &dropped);
-    triangles.truncate(3 * kept_triangles);
+    let dropped: Vec<Vec<u32>> = renamed.into_iter().map(|(_, d)| d).collect();
+    let degenerate = (triangle_count - kept_triangles) as u64;
     let dropped = dropped.concat();
     let source_triangle: Vec<u32> = if !sources {
         Vec::new()
@@ -945,82 +969,6 @@ fn weld_passes(
         triangles,
         source_triangle,
         dropped,
-    }
-}
-
-/// Closes up the welded triangles (step 3 of [`weld_in`]): block `b` of
-/// [`TRI_BLOCK`] triangles lists its dropped ones in `dropped[b]`;
-/// afterwards the kept triangles are at the front, in order.
-///
-/// Why not one `copy_within` per kept run, in order: with a triangle
-/// dropped near the front, that moves nearly the whole array on one
-/// thread (0.7 ms of the dragon's weld, 108 triangles dropped, with two
-/// threads as with one; local timers). Instead each block with `D`
-/// triangles dropped before it moves its kept triangles down within its
-/// own range, in parallel, except its first `D`, whose places are in the
-/// blocks before it (which may not have moved yet): those it saves, and
-/// they go to their places after. Final places are distinct, so no write
-/// meets another, and the places of a block's head are free once the
-/// blocks before it have moved. With many dropped triangles the heads
-/// would be large, and the blocks are moved one after the other instead.
-fn close_up_blocks(triangles: &mut [u32], dropped: &[Vec<u32>]) {
-    use rayon::prelude::*;
-    // Dropped before each block.
-    let mut before = Vec::with_capacity(dropped.len());
-    let mut d = 0;
-    for blk in dropped {
-        before.push(d);
-        d += blk.len();
-    }
-    if d == 0 {
-        return;
-    }
-    let count = triangles.len() / 3;
-    let len = |b: usize| (count - b * TRI_BLOCK).min(TRI_BLOCK);
-    // Block `b`'s kept runs (between its dropped triangles), in triangles
-    // from the block's start.
-    let runs = |b: usize| {
-        let first = b * TRI_BLOCK;
-        let ends = dropped[b].iter().map(move |&t| t as usize - first);
-        let starts = std::iter::once(0).chain(ends.clone().map(|t| t + 1));
-        starts.zip(ends.chain([len(b)]))
-    };
-    let heads: usize = (0..dropped.len())
-        .map(|b| (len(b) - dropped[b].len()).min(before[b]))
-        .sum();
-    if heads > count / 16 {
-        let mut at = 0;
-        for b in 0..dropped.len() {
-            let first = b * TRI_BLOCK;
-            for (from, end) in runs(b) {
-                triangles.copy_within(3 * (first + from)..3 * (first + end), 3 * at);
-                at += end - from;
-            }
-        }
-        return;
-    }
-    let saved: Vec<(usize, Vec<u32>)> = triangles
-        .par_chunks_mut(3 * TRI_BLOCK)
-        .enumerate()
-        .filter(|&(b, _)| before[b] > 0 || !dropped[b].is_empty())
-        .map(|(b, block)| {
-            // The block's j-th kept triangle goes to j - d from its start.
-            let d = before[b];
-            let (mut head, mut j) = (Vec::new(), 0);
-            for (from, end) in runs(b) {
-                let h = (end - from).min(d.saturating_sub(j));
-                head.extend_from_slice(&block[3 * from..3 * (from + h)]);
-                if from + h < end {
-                    block.copy_within(3 * (from + h)..3 * end, 3 * (j + h - d));
-                }
-                j += end - from;
-            }
-            (b, head)
-        })
-        .collect();
-    for (b, head) in saved {
-        let to = 3 * (b * TRI_BLOCK - before[b]);
-        triangles[to..to + head.len()].copy_from_slice(&head);
     }
 }
 
@@ -1395,53 +1343,47 @@ mod tests {
         assert_eq!(w.degenerate(), expect.degenerate());
     }
 
-    /// Blocks closed up as one filter of the dropped triangles would: with
-    /// none dropped, a few (each block moving in parallel, its head saved,
-    /// including a last block shorter than its head and a block with all
-    /// dropped), and many (blocks one after the other), on 1 and 3 threads.
-    /// Caught: a head written one triangle off, a block's move one slot
-    /// off, a head one triangle short, and the sequential path starting at
-    /// the second block.
+    /// Step 3's parts: each closes up its own dropped triangles as it
+    /// renames, then moves down after the parts before it. Dropped: none,
+    /// a few everywhere, every triangle of a part (the first, a middle
+    /// one, the last), and many.
     #[test]
-    fn closing_up_blocks_keeps_the_kept_triangles_in_order() {
-        let count = 5 * TRI_BLOCK + 40;
-        // Which triangles are dropped.
-        type Dropped = fn(usize) -> bool;
-        let cases: [(&str, Dropped); 5] = [
-            ("none", |_| false),
-            // Heads of up to 283 triangles; the last block keeps 40.
-            ("few", |t| {
-                t % 997 == 3 || t == 1 || (2 * TRI_BLOCK..2 * TRI_BLOCK + 200).contains(&t)
+    fn dropped_triangles_closed_up_with_any_threads() {
+        let count = 6 * TRI_BLOCK + 40;
+        let pos: Vec<[f32; 3]> = (0..count + 2).map(|i| [i as f32, 0.5, -1.0]).collect();
+        type Dropped = fn(usize, usize) -> bool;
+        let cases: [(&str, Dropped); 6] = [
+            ("none", |_, _| false),
+            ("few", |t, _| {
+                t % 997 == 3 || t == 1 || t == 6 * TRI_BLOCK + 39
             }),
-            ("the last block all dropped", |t| {
-                t >= 5 * TRI_BLOCK || t % 4093 == 0
-            }),
-            // Heads of a whole block and more: one block after the other.
-            ("a block all dropped", |t| {
-                t / TRI_BLOCK == 3 || t % 4093 == 0
-            }),
-            ("many", |t| t % 7 < 3),
+            ("the first part", |t, n| t < n / 2 || t % 4093 == 0),
+            ("a middle part", |t, n| (n / 3..2 * n / 3).contains(&t)),
+            ("the last part", |t, n| t >= n / 2),
+            ("many", |t, _| t % 7 < 3),
         ];
         for (what, drop) in &cases {
-            let mut tris = vec![0; 3 * count];
-            let mut dropped = vec![Vec::new(); count.div_ceil(TRI_BLOCK)];
-            let mut expect = Vec::new();
-            for (b, list) in dropped.iter_mut().enumerate() {
-                for t in b * TRI_BLOCK..((b + 1) * TRI_BLOCK).min(count) {
-                    let tri = [3 * t as u32, 3 * t as u32 + 1, 3 * t as u32 + 2];
-                    tris[3 * t..3 * t + 3].copy_from_slice(&tri);
-                    if drop(t) {
-                        list.push(t as u32);
+            // Triangle t is (t, t + 1, t + 2), or (t, t, t + 1) when dropped.
+            let idx: Vec<u32> = (0..count)
+                .flat_map(|t| {
+                    let t = t as u32;
+                    if drop(t as usize, count) {
+                        [t, t, t + 1]
                     } else {
-                        expect.extend_from_slice(&tri);
+                        [t, t + 1, t + 2]
                     }
-                }
-            }
-            for threads in [1, 3] {
-                let mut got = tris.clone();
-                with_threads(threads, || close_up_blocks(&mut got, &dropped));
-                got.truncate(expect.len());
-                assert!(got == expect, "{what}, {threads} threads");
+                })
+                .collect();
+            let expect = reference(&pos, &idx);
+            for threads in [1, 2, 3] {
+                let w = with_threads(threads, || weld(&pos, &idx));
+                assert!(w.triangles == expect.triangles, "{what}, {threads} threads");
+                assert!(w.dropped == expect.dropped, "{what}, {threads} threads");
+                assert!(w.positions == expect.positions, "{what}, {threads} threads");
+                assert!(
+                    w.source_triangle == expect.source_triangle,
+                    "{what}, {threads} threads"
+                );
             }
         }
     }
