@@ -918,9 +918,8 @@ fn weld_passes(
     // `kept_triangles` in order.
     unsafe { triangles.set_len(3 * kept_triangles) };
     debug_assert!(!triangles.contains(&UNWRITTEN));
-    let dropped: Vec<Vec<u32>> = renamed.into_iter().map(|(_, d)| d).collect();
     let degenerate = (triangle_count - kept_triangles) as u64;
-    let dropped = dropped.concat();
+    let dropped: Vec<u32> = renamed.into_iter().flat_map(|(_, d)| d).collect();
     let source_triangle: Vec<u32> = if !sources {
         Vec::new()
     } else if degenerate == 0 {
