@@ -69,7 +69,7 @@ impl Edges {
 ///
 /// 1. **Count** the listings and records per range of `RANGE` vertices
 ///    (triangles cut into one chunk per thread, each with its own counts,
-///    in four lanes: see the pass; 16 triangles at a time in AVX-512
+///    in lanes: see the pass; 16 triangles at a time in AVX-512
 ///    registers where pass 3's kernel runs, `count_avx512`).
 /// 2. **List** every triangle under its `lo` and `mid` by the pair of its
 ///    other two corners: `[mid, hi]` under `lo`, `[hi, lo]` under `mid`
@@ -265,16 +265,16 @@ fn build_edges_in<const TRI: bool>(
     let counts: Vec<Vec<u64>> = tri_chunks
         .par_iter()
         .map(|tris| {
-            // Four lanes of counters (lo and mid of even and odd
-            // triangles), each a plane of its own, summed after the loop:
+            // Lanes of counters (lo and mid of every `COUNT_LANES`-th
+            // triangle), each a plane of its own, summed after the loop:
             // a triangle's lo and mid, and consecutive triangles, mostly
             // fall in one range, and each add to a counter waits for the
             // one before. One lane: 2.7–3.2 against 2.1–2.2 ms on the
-            // dragon, 26 against 15 ms on the 5M scene; the four lanes of a
+            // dragon, 26 against 15 ms on the 5M scene; the lanes of a
             // range side by side: 24 ms on the scene (one thread,
             // `stage_probe -- passes` on local edits, benches/ROUNDS.md
-            // "Twenty-first round").
-            let mut lanes = vec![0u64; 4 * ranges];
+            // "Twenty-first round"). How many lanes: see `COUNT_LANES`.
+            let mut lanes = vec![0u64; 2 * COUNT_LANES * ranges];
             let mut odd = 0u64;
             // Whole blocks of 16 triangles in AVX-512 registers where pass
             // 3's kernel runs (without the parity, which only a fed
@@ -298,11 +298,17 @@ fn build_edges_in<const TRI: bool>(
                     };
                     odd ^= key(lo, mid) ^ key(lo, hi) ^ key(mid, hi);
                 }
-                count_triangle(&mut lanes, ranges, i, range_of(lo), range_of(mid));
+                count_triangle(
+                    &mut lanes,
+                    ranges,
+                    i % COUNT_LANES,
+                    range_of(lo),
+                    range_of(mid),
+                );
             }
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
             (0..ranges)
-                .map(|r| (0..4).map(|l| lanes[l * ranges + r]).sum())
+                .map(|r| (0..2 * COUNT_LANES).map(|l| lanes[l * ranges + r]).sum())
                 .collect()
         })
         .collect();
@@ -1615,8 +1621,9 @@ unsafe fn emit_range_avx512(
 }
 
 /// Pass 1's counts (the loop in [`build_edges_in`], without the parity)
-/// for the whole blocks of 16 triangles in `tris`, into the same four
-/// lanes of counters; returns the number of triangles counted.
+/// for the whole blocks of 16 triangles in `tris`, into the same
+/// [`COUNT_LANES`] lanes of counters; returns the number of triangles
+/// counted.
 ///
 /// Each block is three loads; two permutes of each pair of registers take
 /// out every triangle's first, second and third corner
@@ -1633,6 +1640,20 @@ unsafe fn emit_range_avx512(
 /// against 2.88–2.89 ms, its appends to the ranges' streams being what it
 /// waits on.
 ///
+/// A block's ranges are stored as the block is read, and its adds run one
+/// block later. Why: without the adds the kernel took 0.17 ms on the
+/// dragon, with them 1.53 ms (a scratch probe, fastest of 30), and their 32
+/// scalar loads of the ranges came right after the two 64-byte stores that
+/// hold them; a block later those stores are done. (That the loads waited
+/// on the stores is our reading: fewer adds or other counters did not
+/// explain the time, the same adds into 16 lanes taking 1.30–1.40 ms, and
+/// one add for a triangle whose lo and mid share a range 1.46 ms.) The
+/// count pass, one thread, with [`COUNT_LANES`] = 4: 1.39–1.41 → 1.06–1.13
+/// ms on the dragon (`RECYCLE=1 cargo run --release --example stage_probe
+/// -- passes target/dragon/dragon.glb`, three alternations; two threads
+/// 0.73–0.76 → 0.56–0.59 ms) and 8.20–8.23 → 6.04–6.08 ms on the 5M scene
+/// (two).
+///
 /// # Safety
 /// The CPU must have AVX-512F.
 #[cfg(target_arch = "x86_64")]
@@ -1641,51 +1662,73 @@ unsafe fn count_avx512(tris: &[u32], lanes: &mut [u64], ranges: usize) -> usize 
     use std::arch::x86_64::*;
     let blocks = tris.len() / 48;
     let corners = crate::evaluate_simd::TriangleCorners16::new();
-    let (mut lo_range, mut mid_range) = ([0u32; 16], [0u32; 16]);
-    for b in 0..blocks {
-        // SAFETY: block b's 48 words lie inside `tris`.
-        let w = unsafe {
-            let at = tris.as_ptr().add(48 * b);
-            crate::hint::prefetch_stream(at);
-            [0, 16, 32].map(|k| _mm512_loadu_si512(at.add(k).cast()))
-        };
-        let [x, y, z] = [0, 1, 2].map(|c| corners.corner(&w, c));
-        let lo = _mm512_min_epu32(x, _mm512_min_epu32(y, z));
-        let hi = _mm512_max_epu32(x, _mm512_max_epu32(y, z));
-        let mid = _mm512_xor_si512(
-            _mm512_xor_si512(x, y),
-            _mm512_xor_si512(z, _mm512_xor_si512(lo, hi)),
-        );
-        // SAFETY: 16 u32 each.
-        unsafe {
-            _mm512_storeu_si512(
-                lo_range.as_mut_ptr().cast(),
-                _mm512_srli_epi32::<RANGE_SHIFT>(lo),
+    // Block b's ranges (16 lo, then 16 mid) in `held[b % 2]`.
+    let mut held = [[0u32; 32]; 2];
+    for b in 0..=blocks {
+        if b < blocks {
+            // SAFETY: block b's 48 words lie inside `tris`.
+            let w = unsafe {
+                let at = tris.as_ptr().add(48 * b);
+                crate::hint::prefetch_stream(at);
+                [0, 16, 32].map(|k| _mm512_loadu_si512(at.add(k).cast()))
+            };
+            let [x, y, z] = [0, 1, 2].map(|c| corners.corner(&w, c));
+            let lo = _mm512_min_epu32(x, _mm512_min_epu32(y, z));
+            let hi = _mm512_max_epu32(x, _mm512_max_epu32(y, z));
+            let mid = _mm512_xor_si512(
+                _mm512_xor_si512(x, y),
+                _mm512_xor_si512(z, _mm512_xor_si512(lo, hi)),
             );
-            _mm512_storeu_si512(
-                mid_range.as_mut_ptr().cast(),
-                _mm512_srli_epi32::<RANGE_SHIFT>(mid),
-            );
+            let slot = &mut held[b % 2];
+            // SAFETY: 32 u32, 16 for each store.
+            unsafe {
+                _mm512_storeu_si512(
+                    slot.as_mut_ptr().cast(),
+                    _mm512_srli_epi32::<RANGE_SHIFT>(lo),
+                );
+                _mm512_storeu_si512(
+                    slot.as_mut_ptr().add(16).cast(),
+                    _mm512_srli_epi32::<RANGE_SHIFT>(mid),
+                );
+            }
         }
-        for (j, (&l, &m)) in lo_range.iter().zip(&mid_range).enumerate() {
-            count_triangle(lanes, ranges, j, l as usize, m as usize);
+        if b > 0 {
+            let slot = &held[(b - 1) % 2];
+            for j in 0..16 {
+                // A block starts at a multiple of 16, so `j % COUNT_LANES`
+                // is the triangle's lane in the scalar loop's numbering too.
+                let (l, m) = (slot[j] as usize, slot[16 + j] as usize);
+                count_triangle(lanes, ranges, j % COUNT_LANES, l, m);
+            }
         }
     }
     16 * blocks
 }
 
-/// Pass 1's count of triangle `i`, whose smallest and middle corners fall
-/// in ranges `lo` and `mid`, into its lane of `lanes` (four planes of
-/// `ranges` counters: lo and mid of even and odd triangles). Per range,
-/// listings in the high half and records in the low half: one add for
-/// both (2 records under lo, 1 under mid). All chunks together have fewer
-/// than 2^32 records (asserted in [`build_edges_in`]), so the low halves
-/// never carry, even summed over chunks and lanes.
+/// Lanes of pass 1's counters: a triangle's counts go to lane `i %
+/// COUNT_LANES` (`i` its index in its chunk), so that consecutive
+/// triangles, whose corners mostly fall in the same ranges, add to
+/// different counters. With the adds a block after the ranges
+/// ([`count_avx512`]), the count pass on the dragon took 1.06–1.10 ms with
+/// 2 lanes, 1.05–1.08 with 4, 1.14–1.40 with 8 and 1.34–1.62 with 16 (more
+/// counters in more lines of the first-level cache, is our reading), and
+/// on the 5M scene 6.22–6.32 ms with 2 and 6.06–6.08 with 4 (one thread,
+/// `RECYCLE=1 cargo run --release --example stage_probe -- passes`, local
+/// edits, three and two runs).
+const COUNT_LANES: usize = 4;
+
+/// Pass 1's count of a triangle in lane `lane`, whose smallest and middle
+/// corners fall in ranges `lo` and `mid`, into `lanes` (two planes of
+/// `ranges` counters per lane: lo, then mid). Per range, listings in the
+/// high half and records in the low half: one add for both (2 records
+/// under lo, 1 under mid). All chunks together have fewer than 2^32
+/// records (asserted in [`build_edges_in`]), so the low halves never
+/// carry, even summed over chunks and lanes.
 #[inline(always)]
-fn count_triangle(lanes: &mut [u64], ranges: usize, i: usize, lo: usize, mid: usize) {
-    let lane = 2 * (i & 1) * ranges;
-    lanes[lane + lo] += (1 << 32) | 2;
-    lanes[lane + ranges + mid] += (1 << 32) | 1;
+fn count_triangle(lanes: &mut [u64], ranges: usize, lane: usize, lo: usize, mid: usize) {
+    let plane = 2 * lane * ranges;
+    lanes[plane + lo] += (1 << 32) | 2;
+    lanes[plane + ranges + mid] += (1 << 32) | 1;
 }
 
 /// A triangle's corners in increasing id order (no repeated ids): the
