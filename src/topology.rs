@@ -246,7 +246,6 @@ fn build_edges_in<const TRI: bool>(
         u32::MAX / 3
     );
     let ranges = vertex_count.div_ceil(RANGE);
-    let range_of = |v: u32| (v >> RANGE_SHIFT) as usize;
     let per = tcount.div_ceil(chunks.max(1)).max(1);
     let tri_chunks: Vec<&[u32]> = triangles.chunks(3 * per).collect();
 
@@ -265,51 +264,9 @@ fn build_edges_in<const TRI: bool>(
     let counts: Vec<Vec<u64>> = tri_chunks
         .par_iter()
         .map(|tris| {
-            // Lanes of counters (lo and mid of every `COUNT_LANES`-th
-            // triangle), each a plane of its own, summed after the loop:
-            // a triangle's lo and mid, and consecutive triangles, mostly
-            // fall in one range, and each add to a counter waits for the
-            // one before. One lane: 2.7–3.2 against 2.1–2.2 ms on the
-            // dragon, 26 against 15 ms on the 5M scene; the lanes of a
-            // range side by side: 24 ms on the scene (one thread,
-            // `stage_probe -- passes` on local edits, benches/ROUNDS.md
-            // "Twenty-first round"). How many lanes: see `COUNT_LANES`.
-            let mut lanes = vec![0u64; 2 * COUNT_LANES * ranges];
-            let mut odd = 0u64;
-            // Whole blocks of 16 triangles in AVX-512 registers where pass
-            // 3's kernel runs (without the parity, which only a fed
-            // build takes), the rest below.
-            #[cfg(target_arch = "x86_64")]
-            let done = if simd && !parity {
-                // SAFETY: `simd` is set only where the CPU has AVX-512F
-                // (`simd_available`).
-                unsafe { count_avx512(tris, &mut lanes, ranges) }
-            } else {
-                0
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let done = 0;
-            for (i, t) in tris.chunks_exact(3).enumerate().skip(done) {
-                crate::hint::prefetch_stream(tris.as_ptr().wrapping_add(3 * i));
-                let (lo, mid, hi) = sort3(t);
-                if parity {
-                    let key = |a: u32, b: u32| {
-                        ((u64::from(a) << 32) | u64::from(b)).wrapping_mul(0x9e37_79b9_7f4a_7c15)
-                    };
-                    odd ^= key(lo, mid) ^ key(lo, hi) ^ key(mid, hi);
-                }
-                count_triangle(
-                    &mut lanes,
-                    ranges,
-                    i % COUNT_LANES,
-                    range_of(lo),
-                    range_of(mid),
-                );
-            }
+            let (count, odd) = count_chunk(tris, ranges, simd, parity);
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
-            (0..ranges)
-                .map(|r| (0..2 * COUNT_LANES).map(|l| lanes[l * ranges + r]).sum())
-                .collect()
+            count
         })
         .collect();
     let consumer = consumer.filter(|_| odd_edges.into_inner() == 0);
@@ -1258,8 +1215,9 @@ fn emit_range<const TRI: bool>(
     (out.records, out.edges)
 }
 
-/// Whether pass 3 may run its AVX-512 kernel and `sort_range_bmi2`: the
-/// CPU has AVX-512F, AVX-512VL and BMI2 (run-time check) and
+/// Whether pass 3 may run its AVX-512 kernel and `sort_range_bmi2`, and
+/// pass 1 `count_avx512`: the CPU has AVX-512F, AVX-512VL, AVX-512DQ and
+/// BMI2 (run-time check) and
 /// `evaluate_simd::disable_avx512` has not turned the crate's AVX-512
 /// kernels off.
 fn simd_available() -> bool {
@@ -1267,6 +1225,7 @@ fn simd_available() -> bool {
     {
         crate::evaluate_simd::have_avx512()
             && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512dq")
             && std::arch::is_x86_feature_detected!("bmi2")
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -1620,10 +1579,55 @@ unsafe fn emit_range_avx512(
     (out.records, out.edges)
 }
 
-/// Pass 1's counts (the loop in [`build_edges_in`], without the parity)
-/// for the whole blocks of 16 triangles in `tris`, into the same
-/// [`COUNT_LANES`] lanes of counters; returns the number of triangles
-/// counted.
+/// Pass 1 for one chunk of triangles: per range, its listings (high 32
+/// bits) and records (low 32 bits), and with `parity` the xor of the keys
+/// of its triangles' edges (see the pass in [`build_edges_in`]); the
+/// kernel ([`count_avx512`]) takes the whole blocks of 16 triangles when
+/// `simd`, the scalar loop the rest.
+fn count_chunk(tris: &[u32], ranges: usize, simd: bool, parity: bool) -> (Vec<u64>, u64) {
+    // Lanes of counters (lo and mid of every `COUNT_LANES`-th triangle),
+    // each a plane of its own, summed after the loop: a triangle's lo and
+    // mid, and consecutive triangles, mostly fall in one range, and each
+    // add to a counter waits for the one before. One lane: 2.7–3.2 against
+    // 2.1–2.2 ms on the dragon, 26 against 15 ms on the 5M scene; the lanes
+    // of a range side by side: 24 ms on the scene (one thread, `stage_probe
+    // -- passes` on local edits, benches/ROUNDS.md "Twenty-first round").
+    // How many lanes: see `COUNT_LANES`.
+    let mut lanes = vec![0u64; 2 * COUNT_LANES * ranges];
+    let mut odd = 0u64;
+    #[cfg(target_arch = "x86_64")]
+    let done = match (simd, parity) {
+        // SAFETY: `simd` is set only where the CPU has AVX-512F and
+        // AVX-512DQ (`simd_available`).
+        (true, false) => unsafe { count_avx512::<false>(tris, &mut lanes, ranges, &mut odd) },
+        (true, true) => unsafe { count_avx512::<true>(tris, &mut lanes, ranges, &mut odd) },
+        (false, _) => 0,
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let done = {
+        let _ = simd;
+        0
+    };
+    for (i, t) in tris.chunks_exact(3).enumerate().skip(done) {
+        crate::hint::prefetch_stream(tris.as_ptr().wrapping_add(3 * i));
+        let (lo, mid, hi) = sort3(t);
+        if parity {
+            let key = |a: u32, b: u32| ((u64::from(a) << 32) | u64::from(b)).wrapping_mul(EDGE_KEY);
+            odd ^= key(lo, mid) ^ key(lo, hi) ^ key(mid, hi);
+        }
+        let range = |v: u32| (v >> RANGE_SHIFT) as usize;
+        count_triangle(&mut lanes, ranges, i % COUNT_LANES, range(lo), range(mid));
+    }
+    let count = (0..ranges)
+        .map(|r| (0..2 * COUNT_LANES).map(|l| lanes[l * ranges + r]).sum())
+        .collect();
+    (count, odd)
+}
+
+/// Pass 1's counts (the loop in [`build_edges_in`]) for the whole blocks
+/// of 16 triangles in `tris`, into the same [`COUNT_LANES`] lanes of
+/// counters, and with `PARITY` the xor of their edges' keys into `odd`;
+/// returns the number of triangles counted.
 ///
 /// Each block is three loads; two permutes of each pair of registers take
 /// out every triangle's first, second and third corner
@@ -1654,13 +1658,29 @@ unsafe fn emit_range_avx512(
 /// 0.73–0.76 → 0.56–0.59 ms) and 8.20–8.23 → 6.04–6.08 ms on the 5M scene
 /// (two).
 ///
+/// The parity of a fed build (see the pass) is the same xor of the same
+/// keys, 8 triangles' keys at a time in 64-bit lanes (`vpmullq`), folded
+/// into one word at the end: the order of xors does not change the
+/// result. Until the thirty-fifth round a fed build counted in the scalar
+/// loop. The fed topology on the dragon (`build_edges_opposites_only_fed`
+/// with a consumer that reads nothing, a scratch probe, fastest of 15):
+/// one thread 13.42–13.50 → 11.81–11.95 ms, two threads 10.50–10.56 →
+/// 9.71–9.99 ms (three alternations each).
+///
 /// # Safety
-/// The CPU must have AVX-512F.
+/// The CPU must have AVX-512F and AVX-512DQ.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn count_avx512(tris: &[u32], lanes: &mut [u64], ranges: usize) -> usize {
+#[target_feature(enable = "avx512f,avx512dq")]
+unsafe fn count_avx512<const PARITY: bool>(
+    tris: &[u32],
+    lanes: &mut [u64],
+    ranges: usize,
+    odd: &mut u64,
+) -> usize {
     use std::arch::x86_64::*;
     let blocks = tris.len() / 48;
+    let mut parity = _mm512_setzero_si512();
+    let factor = _mm512_set1_epi64(EDGE_KEY as i64);
     let corners = crate::evaluate_simd::TriangleCorners16::new();
     // Block b's ranges (16 lo, then 16 mid) in `held[b % 2]`.
     let mut held = [[0u32; 32]; 2];
@@ -1679,6 +1699,19 @@ unsafe fn count_avx512(tris: &[u32], lanes: &mut [u64], ranges: usize) -> usize 
                 _mm512_xor_si512(x, y),
                 _mm512_xor_si512(z, _mm512_xor_si512(lo, hi)),
             );
+            if PARITY {
+                let key = |a: __m256i, b: __m256i| {
+                    let (a, b) = (_mm512_cvtepu32_epi64(a), _mm512_cvtepu32_epi64(b));
+                    _mm512_mullo_epi64(_mm512_or_si512(_mm512_slli_epi64::<32>(a), b), factor)
+                };
+                let halves =
+                    |v: __m512i| (_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64::<1>(v));
+                let ((l0, l1), (m0, m1), (u0, u1)) = (halves(lo), halves(mid), halves(hi));
+                for (l, m, u) in [(l0, m0, u0), (l1, m1, u1)] {
+                    let keys = _mm512_xor_si512(key(l, u), key(m, u));
+                    parity = _mm512_ternarylogic_epi64::<0x96>(parity, key(l, m), keys);
+                }
+            }
             let slot = &mut held[b % 2];
             // SAFETY: 32 u32, 16 for each store.
             unsafe {
@@ -1702,8 +1735,19 @@ unsafe fn count_avx512(tris: &[u32], lanes: &mut [u64], ranges: usize) -> usize 
             }
         }
     }
+    if PARITY {
+        let mut words = [0u64; 8];
+        // SAFETY: 8 u64.
+        unsafe { _mm512_storeu_si512(words.as_mut_ptr().cast(), parity) };
+        *odd ^= words.iter().fold(0, |x, &w| x ^ w);
+    }
     16 * blocks
 }
+
+/// The odd constant a fed build's pass 1 multiplies each edge `(a, b)`,
+/// as the word `a << 32 | b`, by (a bijection of the words) before it
+/// xors them (see the pass).
+const EDGE_KEY: u64 = 0x9e37_79b9_7f4a_7c15;
 
 /// Lanes of pass 1's counters: a triangle's counts go to lane `i %
 /// COUNT_LANES` (`i` its index in its chunk), so that consecutive
@@ -2023,6 +2067,46 @@ mod tests {
             }
         }
         tris
+    }
+
+    #[test]
+    fn count_kernel_counts_and_xors_as_the_scalar_loop() {
+        // Pass 1 with the kernel on the whole blocks against the scalar
+        // loop on every triangle: the same counts per range, and the same
+        // xor of the edges' keys, exactly; and that xor is 0 on a soup
+        // whose every edge has two triangles (each triangle twice). Sizes
+        // with and without a tail after the last block, over one range
+        // and several. Caught: the keys' xor without the (lo, mid) edge's
+        // (a soup with each triangle twice still gives 0 then), and each
+        // block's adds read from the block's own slot instead of the one
+        // before.
+        if !simd_available() {
+            return;
+        }
+        for (vertices, triangles, seed) in [
+            (5 * RANGE + 11, 16 * 700 + 9, 0x9e37_79b9),
+            (300, 16 * 40, 0x2545_f491),
+            (RANGE / 2, 15, 0x1234_5678),
+        ] {
+            let soup = strip_soup(vertices, triangles, seed);
+            let twice: Vec<u32> = soup
+                .chunks_exact(3)
+                .flat_map(|t| [t[0], t[1], t[2], t[1], t[0], t[2]])
+                .collect();
+            let ranges = vertices.div_ceil(RANGE);
+            for tris in [&soup, &twice] {
+                let (want, want_odd) = count_chunk(tris, ranges, false, true);
+                for parity in [false, true] {
+                    let (got, odd) = count_chunk(tris, ranges, true, parity);
+                    assert!(got == want, "{vertices} vertices: counts");
+                    assert_eq!(odd, if parity { want_odd } else { 0 }, "{vertices}: xor");
+                }
+            }
+            let (_, odd) = count_chunk(&twice, ranges, true, true);
+            assert_eq!(odd, 0, "{vertices} vertices: every edge twice");
+            let (_, odd) = count_chunk(&soup, ranges, true, true);
+            assert_ne!(odd, 0, "{vertices} vertices: open edges");
+        }
     }
 
     #[test]
