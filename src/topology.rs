@@ -1585,14 +1585,16 @@ unsafe fn emit_range_avx512(
 /// kernel ([`count_avx512`]) takes the whole blocks of 16 triangles when
 /// `simd`, the scalar loop the rest.
 fn count_chunk(tris: &[u32], ranges: usize, simd: bool, parity: bool) -> (Vec<u64>, u64) {
-    // Lanes of counters (lo and mid of every `COUNT_LANES`-th triangle),
-    // each a plane of its own, summed after the loop: a triangle's lo and
-    // mid, and consecutive triangles, mostly fall in one range, and each
-    // add to a counter waits for the one before. One lane: 2.7–3.2 against
-    // 2.1–2.2 ms on the dragon, 26 against 15 ms on the 5M scene; the lanes
-    // of a range side by side: 24 ms on the scene (one thread, `stage_probe
-    // -- passes` on local edits, benches/ROUNDS.md "Twenty-first round").
-    // How many lanes: see `COUNT_LANES`.
+    // Lanes of counters, triangle i's in lane i % COUNT_LANES, each lane
+    // two planes of its own (lo, then mid), summed after the loop: a
+    // triangle's lo and mid, and consecutive triangles, mostly fall in one
+    // range, and each add to a counter waits for the one before. A single
+    // plane for all: 2.7–3.2 against 2.1–2.2 ms with four planes (two
+    // lanes) on the dragon, 26 against 15 ms on the 5M scene; the four
+    // planes' counters of a range side by side: 24 ms on the scene (one
+    // thread, `stage_probe -- passes` on local edits, benches/ROUNDS.md
+    // "Twenty-first round", where the planes are called lanes). How many
+    // lanes: see `COUNT_LANES`.
     let mut lanes = vec![0u64; 2 * COUNT_LANES * ranges];
     let mut odd = 0u64;
     #[cfg(target_arch = "x86_64")]
@@ -1758,7 +1760,9 @@ const EDGE_KEY: u64 = 0x9e37_79b9_7f4a_7c15;
 /// counters in more lines of the first-level cache, is our reading), and
 /// on the 5M scene 6.22–6.32 ms with 2 and 6.06–6.08 with 4 (one thread,
 /// `RECYCLE=1 cargo run --release --example stage_probe -- passes`, local
-/// edits, three and two runs).
+/// edits, three and two runs). Until the thirty-fifth round there were 2,
+/// and 4 without the delay measured no faster (benches/ROUNDS.md,
+/// Thirty-fourth round, where each plane is called a lane).
 const COUNT_LANES: usize = 4;
 
 /// Pass 1's count of a triangle in lane `lane`, whose smallest and middle
