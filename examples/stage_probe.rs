@@ -8,7 +8,7 @@
 //! cargo run --release --example stage_probe -- read FILE     # read against map, first touch
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld and its steps, memory recycled, and std's sort of its words
-//! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes
+//! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes, and fed
 //! cargo run --release --example stage_probe -- buckets MODEL # weld + topology + bucket counts (the stages bench's `ours_buckets`), then meshoptimizer's adjacency, with their page faults
 //! cargo run --release --example stage_probe -- floor MODEL   # `buckets` with fresh and with recycled memory, and the fresh pages of its output alone, alternated: the fresh-memory floor
 //! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
@@ -172,7 +172,11 @@ fn read(path: &Path) {
 
 /// The topology's four passes on the welded model (one thread unless
 /// `RAYON_NUM_THREADS` says otherwise): the fastest time of each over 15
-/// runs (not necessarily from the same run).
+/// runs (not necessarily from the same run); then, alternated with the
+/// plain topology in another 15 runs, the topology fed as a build with two
+/// threads feeds it (`build_edges_opposites_only_fed`, with a consumer
+/// that only reads how many records there are), whose count pass also
+/// xors its edges' keys.
 fn passes(path: &Path) {
     let soup = svpack::load::load(path).unwrap();
     let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
@@ -199,6 +203,24 @@ fn passes(path: &Path) {
         best[3],
         best[4]
     );
+    let (mut fed, mut plain) = (f64::MAX, f64::MAX);
+    for _ in 0..15 {
+        let t = Instant::now();
+        let e = svpack::topology::build_edges_opposites_only_fed(
+            &w.triangles,
+            w.positions.len(),
+            &mut |feed: &svpack::topology::EmitFeed| {
+                std::hint::black_box(feed.records());
+            },
+        );
+        fed = fed.min(t.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(e);
+        let t = Instant::now();
+        let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
+        plain = plain.min(t.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(e);
+    }
+    println!("fed, as a build with two threads: topology {fed:.2} ms, against {plain:.2} ms plain");
 }
 
 /// The evaluator on MODEL's build, one light, as the evaluate bench's

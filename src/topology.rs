@@ -1665,9 +1665,12 @@ fn count_chunk(tris: &[u32], ranges: usize, simd: bool, parity: bool) -> (Vec<u6
 /// into one word at the end: the order of xors does not change the
 /// result. Until the thirty-fifth round a fed build counted in the scalar
 /// loop. The fed topology on the dragon (`build_edges_opposites_only_fed`
-/// with a consumer that reads nothing, a scratch probe, fastest of 15):
-/// one thread 13.42–13.50 → 11.81–11.95 ms, two threads 10.50–10.56 →
-/// 9.71–9.99 ms (three alternations each).
+/// with a consumer that reads nothing, fastest of 15, memory kept; a
+/// scratch probe with the scalar loop forced by a local switch, now the
+/// second line of `RECYCLE=1 cargo run --release --example stage_probe --
+/// passes target/dragon/dragon.glb`): one thread 13.42–13.50 →
+/// 11.81–11.95 ms, two threads 10.50–10.56 → 9.71–9.99 ms (three
+/// alternations each).
 ///
 /// # Safety
 /// The CPU must have AVX-512F and AVX-512DQ.
