@@ -190,39 +190,47 @@ fn component_range<const SHIFT: u32>(a: &[u128]) -> (u32, u32) {
 }
 
 /// Sorts the words of `a` by key, in place; `scratch` is as long as `a`.
-/// Words with equal keys may end up in any order: nothing downstream
-/// depends on it.
+/// With `INTO`, the sorted words go to `scratch` instead, and `a` is left
+/// in any order. Words with equal keys may end up in any order: nothing
+/// downstream depends on it.
 ///
 /// Method: [`counting_pass`] on the first key component (x, y or z) that is
 /// not the same in every word. One monomorphised pass per component keeps
 /// the shifts constant.
-fn sort_words(a: &mut [u128], scratch: &mut [u128], counts: &mut Vec<u32>) {
+fn sort_words<const INTO: bool>(a: &mut [u128], scratch: &mut [u128], counts: &mut Vec<u32>) {
     debug_assert_eq!(a.len(), scratch.len());
     if a.len() <= SMALL_SORT {
-        insertion_sort(a);
+        if INTO {
+            insertion_sort_into(a, scratch);
+        } else {
+            insertion_sort(a);
+        }
         return;
     }
     let (lo, hi) = component_range::<96>(a);
     if lo != hi {
-        return counting_pass::<96, false>(a, scratch, counts, lo, hi - lo);
+        return counting_pass::<96, false, INTO>(a, scratch, counts, lo, hi - lo);
     }
     let (lo, hi) = component_range::<64>(a);
     if lo != hi {
-        return counting_pass::<64, false>(a, scratch, counts, lo, hi - lo);
+        return counting_pass::<64, false, INTO>(a, scratch, counts, lo, hi - lo);
     }
     let (lo, hi) = component_range::<32>(a);
     if lo != hi {
-        counting_pass::<32, false>(a, scratch, counts, lo, hi - lo);
+        return counting_pass::<32, false, INTO>(a, scratch, counts, lo, hi - lo);
     }
     // Otherwise every key is equal: nothing to order.
+    if INTO {
+        scratch.copy_from_slice(a);
+    }
 }
 
-/// Part of [`sort_words`]: all words of `a` agree on the key components
-/// before the one at bit `SHIFT`, whose values span `base..=base + range`
-/// (`range > 0`).
+/// Part of [`sort_words`] (same `INTO`): all words of `a` agree on the
+/// key components before the one at bit `SHIFT`, whose values span
+/// `base..=base + range` (`range > 0`).
 ///
-/// A counting sort into one to two buckets per word, then one insertion sort
-/// over the whole slice. The bucket is the component minus `base`, shifted
+/// A counting sort into one to two buckets per word, then an insertion sort
+/// over the buckets. The bucket is the component minus `base`, shifted
 /// right until it fits: non-decreasing in the key, because the components
 /// before it are equal. Most buckets then hold at most one or two words, so
 /// the slice comes out of the counting sort nearly sorted and the insertion
@@ -232,6 +240,19 @@ fn sort_words(a: &mut [u128], scratch: &mut [u128], counts: &mut Vec<u32>) {
 /// The smallest and largest words land in different buckets, so every
 /// bucket is shorter than `a` and the recursion ends.
 ///
+/// The counting sort leaves the words in `scratch`. Each long bucket is
+/// sorted from there straight to where the result goes (`a`, or with
+/// `INTO` `scratch` itself), and only the runs of short buckets between
+/// the long ones go through the final insertion sort (into `a`, or with
+/// `INTO` in place). Why: until the thirty-sixth round a long bucket was
+/// sorted back into `scratch` and then went through the insertion sort
+/// over the whole slice with the rest, one more compare and copy of 70%
+/// of the dragon's words (those on its grid planes). One thread,
+/// `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release --example
+/// stage_probe -- weld`, the sort step: the dragon 6.85–6.89 → 6.44–6.49
+/// ms (four alternations), the 5M scene 36.15–36.34 → 35.11–35.64 ms
+/// (two); two threads, the dragon 3.85–3.87 → 3.61–3.65 ms (three).
+///
 /// With `CLAMP`, `base..=base + range` is a guess (from where `a` lies in
 /// [`sort_vertices`]' buckets): components outside it go to the first or
 /// last bucket, which keeps the bucket non-decreasing in the key, and the
@@ -239,7 +260,7 @@ fn sort_words(a: &mut [u128], scratch: &mut [u128], counts: &mut Vec<u32>) {
 /// one bucket, the exact passes of [`sort_words`] run instead, so the
 /// recursion still ends. Why: finding the exact range took a pass over
 /// every group's words, a fifth of the groups' sorting (`perf annotate`).
-fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
+fn counting_pass<const SHIFT: u32, const CLAMP: bool, const INTO: bool>(
     a: &mut [u128],
     scratch: &mut [u128],
     counts: &mut Vec<u32>,
@@ -289,14 +310,29 @@ fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
         // A guessed range that put every word in one bucket (many words
         // on one x): the exact passes instead of a scatter that moves none.
         counts.truncate(first);
-        return sort_words(a, scratch, counts);
+        return sort_words::<INTO>(a, scratch, counts);
     }
     for &w in a.iter() {
         let c = &mut count[bucket(w)];
         scratch[*c as usize] = w;
         *c += 1;
     }
-    // `counts[first + d]` is now the end of bucket d.
+    // `counts[first + d]` is now the end of bucket d. Sorts the short
+    // buckets from `done` to the long bucket `begin..end`, then that
+    // bucket, each where the result goes; buckets are non-decreasing in
+    // the key, so the runs can be sorted apart.
+    let n = a.len();
+    let mut done = 0;
+    let mut finish = |counts: &mut Vec<u32>, begin: usize, end: usize| {
+        if INTO {
+            insertion_sort(&mut scratch[done..begin]);
+            sort_words::<false>(&mut scratch[begin..end], &mut a[begin..end], counts);
+        } else {
+            insertion_sort_into(&scratch[done..begin], &mut a[done..begin]);
+            sort_words::<true>(&mut scratch[begin..end], &mut a[begin..end], counts);
+        }
+        done = end;
+    };
     if longs <= LONG_BUCKETS {
         for &d in &long[..longs] {
             let d = first + d as usize;
@@ -306,20 +342,21 @@ fn counting_pass<const SHIFT: u32, const CLAMP: bool>(
                 counts[d - 1] as usize
             };
             let end = counts[d] as usize;
-            sort_words(&mut scratch[begin..end], &mut a[begin..end], counts);
+            finish(counts, begin, end);
         }
     } else {
         let mut begin = 0;
         for d in first..first + buckets {
             let end = counts[d] as usize;
             if end - begin > SMALL_SORT {
-                sort_words(&mut scratch[begin..end], &mut a[begin..end], counts);
+                finish(counts, begin, end);
             }
             begin = end;
         }
     }
+    // The short buckets after the last long one.
+    finish(counts, n, n);
     counts.truncate(first);
-    insertion_sort_into(scratch, a);
 }
 
 /// The runs (welded ids) that no marked vertex is in, in increasing order:
@@ -606,9 +643,9 @@ fn sort_vertices<'w>(
                     let guess = (buckets > 1).then(|| (edge(b), edge(b + 1)));
                     match guess {
                         Some((lo, hi)) if lo < hi => {
-                            counting_pass::<96, true>(g, scratch, counts, lo, hi - lo)
+                            counting_pass::<96, true, false>(g, scratch, counts, lo, hi - lo)
                         }
-                        _ => sort_words(g, scratch, counts),
+                        _ => sort_words::<false>(g, scratch, counts),
                     }
                 } else {
                     insertion_sort(g);
@@ -1241,10 +1278,21 @@ mod tests {
         let mut few: Vec<[f32; 3]> = (0..3000).map(|i| plane(x(i), &mut rng)).collect();
         few.extend((0..900).map(|i| plane(x(i % 3 * 1000 + 1), &mut rng)));
         let many: Vec<[f32; 3]> = (0..8000).map(|i| plane(x(i % 200), &mut rng)).collect();
+        // Lines of one x and y (a grid's edges along z): 3 planes, each
+        // with 4 lines of 60 words among 500 other words, so that a long
+        // bucket's own pass (on y) has long buckets (on z), three levels.
+        let mut lines: Vec<[f32; 3]> = (0..3000).map(|i| plane(x(i), &mut rng)).collect();
+        for i in 0..3 * 500 {
+            lines.push(plane(x(i % 3 * 1000 + 1), &mut rng));
+        }
+        for i in 0..3 * 4 * 60 {
+            let (p, l) = (i % 3, i / 3 % 4);
+            lines.push([x(p * 1000 + 1), 2000.0 + l as f32, (rng() % 1000) as f32]);
+        }
         // One case for each path.
         const { assert!(3 <= LONG_BUCKETS && LONG_BUCKETS < 200) };
-        for pos in [few, many] {
-            let mut words: Vec<u128> = pos
+        for pos in [few, many, lines] {
+            let words: Vec<u128> = pos
                 .iter()
                 .enumerate()
                 .map(|(i, &p)| vertex_word(p, i))
@@ -1252,12 +1300,36 @@ mod tests {
             let mut expect = words.clone();
             expect.sort_unstable();
             let (lo, hi) = component_range::<96>(&words);
-            let mut scratch = vec![0u128; words.len()];
-            counting_pass::<96, false>(&mut words, &mut scratch, &mut Vec::new(), lo, hi - lo);
-            assert!(words.windows(2).all(|w| key(w[0]) <= key(w[1])));
-            let mut got = words.clone();
-            got.sort_unstable();
-            assert!(got == expect, "the same words");
+            // In place, and into the scratch (as a long bucket's pass
+            // sorts), each with the same words.
+            for into in [false, true] {
+                let mut a = words.clone();
+                let mut scratch = vec![0u128; words.len()];
+                if into {
+                    counting_pass::<96, false, true>(
+                        &mut a,
+                        &mut scratch,
+                        &mut Vec::new(),
+                        lo,
+                        hi - lo,
+                    );
+                    a = scratch;
+                } else {
+                    counting_pass::<96, false, false>(
+                        &mut a,
+                        &mut scratch,
+                        &mut Vec::new(),
+                        lo,
+                        hi - lo,
+                    );
+                }
+                assert!(
+                    a.windows(2).all(|w| key(w[0]) <= key(w[1])),
+                    "sorted, into: {into}"
+                );
+                a.sort_unstable();
+                assert!(a == expect, "the same words, into: {into}");
+            }
         }
     }
 
