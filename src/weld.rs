@@ -102,6 +102,43 @@ fn word_position(w: u128) -> [f32; 3] {
     ]
 }
 
+/// Writes the position of word `*w` ([`word_position`]) to `out[0]`, and
+/// four bytes of garbage to the start of `out[1]`, which the caller
+/// writes later.
+///
+/// Why: one 16-byte load, the keys of all four lanes decoded at once and a
+/// shuffle from the word's lanes (index, z, y, x) to (x, y, z, _), stored
+/// whole: the weld's numbering step did three shifts, three decodings and
+/// three stores per vertex. One thread, `RECYCLE=1 RAYON_NUM_THREADS=1
+/// cargo run --release --example stage_probe -- weld FILE`: the dragon's
+/// step 1.39–1.43 → 1.18–1.20 ms (four alternations), the 5M scene's
+/// 8.84–9.26 → 7.55–7.86 ms (two).
+#[inline(always)]
+fn write_position_padded(out: &mut [MaybeUninit<[f32; 3]>], w: &u128) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        assert!(out.len() >= 2);
+        // SAFETY: SSE2 is part of x86-64; the load reads `*w`, and the
+        // store writes 16 of the at least 24 bytes of `out`.
+        unsafe {
+            let v = _mm_loadu_si128((w as *const u128).cast());
+            // `from_order_key` of every lane: k ^ ((!k >> 31) | sign bit),
+            // the shift arithmetic.
+            let flip = _mm_or_si128(
+                _mm_srai_epi32::<31>(_mm_xor_si128(v, _mm_set1_epi32(-1))),
+                _mm_set1_epi32(i32::MIN),
+            );
+            let p = _mm_shuffle_epi32::<0b00_01_10_11>(_mm_xor_si128(v, flip));
+            _mm_storeu_si128(out.as_mut_ptr().cast(), p);
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        out[0] = MaybeUninit::new(word_position(*w));
+    }
+}
+
 /// Slices of at most this many words are insertion sorted, and buckets of
 /// at most this many words left to the final insertion sort of
 /// [`counting_pass`].
@@ -836,8 +873,9 @@ fn weld_passes(
         .with_min_len(64)
         .for_each(|(words, out, first_run)| {
             // Branch-free: every word writes its run's position (the same
-            // value for every word of a run), and the run id steps when the
-            // key changes.
+            // value for every word of a run; 16 bytes but for the group's
+            // last run, see `write_position_padded`), and the run id steps
+            // when the key changes.
             //
             // The run ids go to the words' input indices, all over `run`,
             // which is larger than L2 on large meshes: the slot of the
@@ -861,7 +899,11 @@ fn weld_passes(
                 }
                 r = r.wrapping_add((key(w) != prev_key) as usize);
                 prev_key = key(w);
-                out[r] = MaybeUninit::new(word_position(w));
+                if r + 1 < out.len() {
+                    write_position_padded(&mut out[r..r + 2], &words[j]);
+                } else {
+                    out[r] = MaybeUninit::new(word_position(w));
+                }
                 // SAFETY: the word's vertex index is below n, and no other
                 // word has it (one word per input vertex), so no other job
                 // writes this slot.
