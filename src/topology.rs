@@ -10,8 +10,8 @@
 //! Method: every triangle is listed (by its other two corners, 8 bytes)
 //! under the two corners that are the smaller endpoint of one of its edges,
 //! appended to the range of 8,192 vertices the corner falls in; then, range
-//! by range, the listings are put in vertex order in a buffer that stays in
-//! the cache, and vertex by vertex that vertex's edges sorted by larger
+//! by range, the listings are put by vertex in a buffer that stays in the
+//! cache, and vertex by vertex that vertex's edges sorted by larger
 //! endpoint, a handful of records on real meshes (the vertex valence). See
 //! [`build_edges`].
 
@@ -95,9 +95,9 @@ impl Edges {
 /// 3. **Emit**, one group of consecutive vertices per thread (groups cut at
 ///    multiples of `RANGE` vertices so they hold about equal numbers of
 ///    records, counted per range in pass 1), range by range: the range's
-///    listings put in vertex order by a counting sort on the place
-///    (`sort_range`, in a buffer of the job's that stays in L2), then a
-///    vertex's listings are read in
+///    listings put by vertex, each to its vertex's next slot of 8
+///    (`sort_range`, in a buffer of the job's that stays in L2; the few
+///    past 8 aside), then a vertex's listings are read in
 ///    order, each giving its edge records at that vertex (the listing, and
 ///    under `lo` also the swapped pair) without reading the triangle, its
 ///    few edge records sorted by larger endpoint, stably (`sort_small`, a
@@ -440,7 +440,7 @@ fn build_edges_in<const TRI: bool>(
                         edges: 0,
                     };
                     let (records, edges) =
-                        emit_ranges::<TRI>(out, &buckets, first..last, last, scratch, simd);
+                        emit_ranges::<TRI>(out, &buckets, first..last, scratch, simd);
                     // The group's records filled its `m` slots (and its range of
                     // `opp_tri`): pass 1 counted them.
                     assert_eq!(records, m, "topology: records miscounted");
@@ -587,7 +587,7 @@ impl Entry for u64 {
     }
     /// `p` and `q` deposited each in a half of a word, which is the pair
     /// (little-endian): one instruction for the two shifts and masks, in
-    /// the loop of `sort_range` that puts every listing in vertex order.
+    /// the loop of `sort_range` that puts every listing by vertex.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     unsafe fn pair_deposited(self, bits: u32) -> [u32; 2] {
@@ -688,16 +688,37 @@ impl Buckets<'_> {
     }
 }
 
-/// A pass 3 job's buffers: a range's listings in vertex order, their
-/// triangle ids, where each vertex's start, the next range's counts (and
-/// which range they are, if taken), and `emit_vertex`'s records.
+/// A pass 3 job's buffers: a range's listings in their vertices' slots
+/// and their triangle ids, each vertex's number of listings, the listings
+/// past the slots ([`sort_range`]), and the emit's own.
 struct Scratch {
     pairs: Vec<[u32; 2]>,
     tri: Vec<u32>,
-    start: Box<[u32; RANGE + 1]>,
-    next: Box<[u32; RANGE + 1]>,
-    counted: Option<usize>,
+    fill: Box<[u32; RANGE]>,
+    spill: Vec<Spilled>,
+    buf: EmitBuf,
+}
+
+/// A listing past its vertex's [`SLOTS`]: the vertex's place in its
+/// range, the pair and (with TRI) the triangle.
+type Spilled = (u32, [u32; 2], u32);
+
+/// Listing slots per vertex in a pass 3 job's scratch.
+const SLOTS: usize = 8;
+
+/// Where the slots start in a job's `pairs`: its first cache line
+/// boundary, so that a vertex's slots are one line.
+fn slots_at(pairs: &[[u32; 2]]) -> usize {
+    pairs.as_ptr().align_offset(64)
+}
+
+/// The emit's own buffers: a vertex's records (`emit_vertex`), and the
+/// listings of a vertex with more than [`SLOTS`] gathered in one place.
+#[derive(Default)]
+struct EmitBuf {
     records: Vec<[u32; 4]>,
+    pairs: Vec<[u32; 2]>,
+    tri: Vec<u32>,
 }
 
 impl Scratch {
@@ -705,43 +726,44 @@ impl Scratch {
         Scratch {
             pairs: Vec::new(),
             tri: Vec::new(),
-            start: Box::new([0; RANGE + 1]),
-            next: Box::new([0; RANGE + 1]),
-            counted: None,
-            records: Vec::new(),
+            fill: Box::new([0; RANGE]),
+            spill: Vec::new(),
+            buf: EmitBuf::default(),
         }
     }
 }
 
-/// Range `r`'s listings into `scratch` in vertex order, each vertex's in
-/// the order they were listed (so triangle order), with their triangle
-/// ids when TRI; `scratch.start[i]..scratch.start[i + 1]` are then the
-/// range's i-th vertex's. A counting sort on the place in the range: its
-/// counters (32 KB, and as many to fill from) and its output (256 KB for
-/// the dragon's average range) stay in L2.
+/// Range `r`'s listings (of its `vertices` vertices) into `scratch` by
+/// vertex, each vertex's in the order they were listed (so triangle
+/// order), with their triangle ids when TRI: the range's i-th vertex's
+/// first [`SLOTS`] listings in its slots from `i * SLOTS` (past
+/// [`slots_at`]), the rest in `scratch.spill`, by vertex and then in
+/// listing order, and its number of listings in `scratch.fill[i]`. One
+/// pass: each listing goes to its vertex's next slot. The counters (32 KB)
+/// and the slots (512 KB for a whole range) stay in L2.
 ///
-/// With `count_next`, range `r + 1`'s counts are taken in the same loop as
-/// this range's scatter, for the next call (`scratch.counted`): two
-/// independent streams of work in one loop, where the scatter alone waits
-/// on its stores. The emit pass 10.6–11.5 → 10.0–10.6 ms on the dragon
-/// and 68.6–69.8 → 60.6–64.0 ms on the 5M scene (one thread, `RECYCLE=1
-/// cargo run --release --example stage_probe -- passes`, three
-/// alternations). The caller asks for it only while `r + 1` is its own:
-/// another job's records go over the next group's listings.
+/// Why slots (until the thirty-sixth round a counting sort on the place
+/// put the listings one vertex after the other: a pass to count them,
+/// the counts' sums, and a pass to scatter them, the next range's count
+/// taken in the same loop as this range's scatter): no count pass, and a
+/// vertex's listings (4 on average on the dragon, more than 8 for 84 of
+/// its 435,545 vertices) lie in one cache line of their own. One thread,
+/// `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release --example
+/// stage_probe -- passes FILE`, the emit pass: the dragon 7.55–7.67 →
+/// 6.87–7.03 ms (three alternations; 6.82–6.85 ms with the slots on a
+/// line boundary, against 6.86–6.90), the 5M scene 39.49–39.61 →
+/// 35.93–36.00 ms (two).
 // Inlined so that `sort_range_bmi2`'s copy is compiled with BMI2, which
 // `Entry::pair_deposited`'s `pdep` needs to be inlined in its loop.
 #[inline(always)]
 fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
     buckets: &Buckets,
     r: usize,
-    count_next: bool,
+    vertices: usize,
     scratch: &mut Scratch,
 ) {
-    let span = |r: usize| {
-        let from = buckets.start[r] as usize;
-        (from, buckets.start[r + 1] as usize - from)
-    };
-    let (from, len) = span(r);
+    let from = buckets.start[r] as usize;
+    let len = buckets.start[r + 1] as usize - from;
     let bits = buckets.bits.unwrap_or(0);
     // Entries are read unaligned: the listings are a Vec<u32> (their
     // memory becomes `opp`), so a u64 entry may sit at a 4-byte boundary.
@@ -750,82 +772,55 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
     // ids), and no record has been written over them yet (the caller's
     // order).
     let entry = |j: usize| unsafe { at.wrapping_add(j).read_unaligned() };
-    // The first read of a range's listings (its count) comes from L3 or
-    // memory, the second (the scatter) from L2: the count asks for the
-    // stream ahead (`hint::STREAM_AHEAD`), once per line's worth of
-    // entries.
     let per_line = (64 / std::mem::size_of::<E>()).max(1);
-    let count_hint = |j: usize| {
+    let ids = buckets.tri as *const u32;
+    let fill = &mut scratch.fill[..vertices];
+    fill.fill(0);
+    scratch.spill.clear();
+    // (One more vertex's worth: see `slots_at`.)
+    if scratch.pairs.len() < (vertices + 1) * SLOTS {
+        scratch.pairs.resize((vertices + 1) * SLOTS, [0; 2]);
+    }
+    if TRI && scratch.tri.len() < vertices * SLOTS {
+        scratch.tri.resize(vertices * SLOTS, 0);
+    }
+    let first_slot = slots_at(&scratch.pairs);
+    let pairs = &mut scratch.pairs[first_slot..first_slot + vertices * SLOTS];
+    let (tri, spill) = (&mut scratch.tri[..], &mut scratch.spill);
+    for j in from..from + len {
         if j.is_multiple_of(per_line) {
             crate::hint::prefetch_stream(at.wrapping_add(j));
         }
-    };
-    let ids = buckets.tri as *const u32;
-    if scratch.counted == Some(r) {
-        std::mem::swap(&mut scratch.start, &mut scratch.next);
-    } else {
-        scratch.start.fill(0);
-        for j in from..from + len {
-            count_hint(j);
-            scratch.start[entry(j).place() + 1] += 1;
-        }
-    }
-    let start = &mut *scratch.start;
-    for i in 1..=RANGE {
-        start[i] += start[i - 1];
-    }
-    let mut fill = [0u32; RANGE];
-    fill.copy_from_slice(&start[..RANGE]);
-    if scratch.pairs.len() < len {
-        scratch.pairs.resize(len, [0; 2]);
-    }
-    if TRI && scratch.tri.len() < len {
-        scratch.tri.resize(len, 0);
-    }
-    let (pairs, tri) = (&mut scratch.pairs[..len], &mut scratch.tri[..]);
-    let mut put = |j: usize| {
-        let e = entry(from + j);
+        let e = entry(j);
         debug_assert!(!e.unwritten(), "topology: listing not written");
         let place = e.place();
-        let s = fill[place] as usize;
+        let c = fill[place] as usize;
         fill[place] += 1;
-        pairs[s] = if DEPOSIT {
+        let pair = if DEPOSIT {
             // SAFETY: DEPOSIT only in `sort_range_bmi2`.
             unsafe { e.pair_deposited(bits) }
         } else {
             e.pair(bits)
         };
-        if TRI {
+        let id = if TRI {
             // SAFETY: as for the entries.
-            let id = unsafe { ids.wrapping_add(from + j).read() };
+            let id = unsafe { ids.wrapping_add(j).read() };
             debug_assert!(id != UNWRITTEN, "topology: listing not written");
-            tri[s] = id;
+            id
+        } else {
+            0
+        };
+        if c < SLOTS {
+            pairs[place * SLOTS + c] = pair;
+            if TRI {
+                tri[place * SLOTS + c] = id;
+            }
+        } else {
+            spill.push((place as u32, pair, id));
         }
-    };
-    if count_next {
-        let (from2, len2) = span(r + 1);
-        let next = &mut *scratch.next;
-        next.fill(0);
-        let both = len.min(len2);
-        for j in 0..both {
-            put(j);
-            count_hint(from2 + j);
-            next[entry(from2 + j).place() + 1] += 1;
-        }
-        for j in both..len {
-            put(j);
-        }
-        for j in from2 + both..from2 + len2 {
-            count_hint(j);
-            next[entry(j).place() + 1] += 1;
-        }
-        scratch.counted = Some(r + 1);
-    } else {
-        for j in 0..len {
-            put(j);
-        }
-        scratch.counted = None;
     }
+    // Each vertex's spilled listings together, in listing order (stable).
+    spill.sort_by_key(|s| s.0);
 }
 
 /// [`sort_range`] with each packed listing's pair taken by one `pdep`
@@ -843,10 +838,10 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
 unsafe fn sort_range_bmi2<E: Entry, const TRI: bool>(
     buckets: &Buckets,
     r: usize,
-    count_next: bool,
+    vertices: usize,
     scratch: &mut Scratch,
 ) {
-    sort_range::<E, TRI, true>(buckets, r, count_next, scratch)
+    sort_range::<E, TRI, true>(buckets, r, vertices, scratch)
 }
 
 /// Edges as borrowed arrays, in the layout of [`Edges`] (without the
@@ -1049,8 +1044,7 @@ fn emit_fed(
                     edges: 0,
                 }
             };
-            let (r, ne) =
-                emit_ranges::<false>(out, buckets, v..next, vertex_count, &mut scratch, simd);
+            let (r, ne) = emit_ranges::<false>(out, buckets, v..next, &mut scratch, simd);
             (records, edges) = (records + r, edges + ne);
             feed_ref.done.store(edges, Release);
             v = next;
@@ -1083,44 +1077,62 @@ struct GroupOut<'a> {
     edges: usize,
 }
 
-/// A range's listings in vertex order ([`sort_range`]), as pass 3's emit
-/// reads them.
+/// A range's listings by vertex ([`sort_range`]), as pass 3's emit reads
+/// them.
 struct Listings<'a> {
-    /// `start[v - first]..start[v - first + 1]` are vertex v's listings.
-    start: &'a [u32],
-    /// The vertex `start` begins with.
+    /// `fill[v - first]` is vertex v's number of listings.
+    fill: &'a [u32],
+    /// The vertex `fill` begins with.
     first: usize,
-    /// The listings.
+    /// [`SLOTS`] slots per vertex, its first listings from the first.
     pairs: &'a [[u32; 2]],
-    /// Each listing's triangle (empty without `opp_tri`).
+    /// Each slot's triangle (empty without `opp_tri`).
     tri: &'a [u32],
+    /// The listings past the slots, by vertex.
+    spill: &'a [Spilled],
     /// Every vertex id is below [`KEY_IDS`] − 1, so the AVX-512 kernel may
     /// sort keys of 32 bits (an id and a rank of 4 bits).
     narrow: bool,
 }
 
 impl Listings<'_> {
-    /// Vertex `v`'s listings and where they start.
+    /// Where vertex `v`'s slots start, and its number of listings (more
+    /// than [`SLOTS`] when some are spilled: see [`Listings::gather`]).
     #[inline(always)]
     fn of(&self, v: usize) -> (usize, usize) {
-        (
-            self.start[v - self.first] as usize,
-            self.start[v - self.first + 1] as usize,
-        )
+        let p = v - self.first;
+        (p * SLOTS, self.fill[p] as usize)
+    }
+
+    /// All `l` listings of vertex `v` (more than [`SLOTS`]) and their
+    /// triangles into `buf`: its slots, then its spilled listings from
+    /// `*spilled` on, which moves past them (vertices are asked for in
+    /// order).
+    fn gather(&self, v: usize, l: usize, spilled: &mut usize, buf: &mut EmitBuf) {
+        let from = (v - self.first) * SLOTS;
+        let rest = &self.spill[*spilled..*spilled + l - SLOTS];
+        debug_assert!(rest.iter().all(|s| s.0 as usize == v - self.first));
+        *spilled += l - SLOTS;
+        buf.pairs.clear();
+        buf.pairs.extend_from_slice(&self.pairs[from..from + SLOTS]);
+        buf.pairs.extend(rest.iter().map(|s| s.1));
+        buf.tri.clear();
+        if !self.tri.is_empty() {
+            buf.tri.extend_from_slice(&self.tri[from..from + SLOTS]);
+            buf.tri.extend(rest.iter().map(|s| s.2));
+        }
     }
 }
 
 /// Pass 3 for `vertices` (whole ranges; the last may end at the vertex
-/// count): each range's listings put in vertex order ([`sort_range`]),
-/// then its edges emitted from there; its records go to `out` after the
-/// ones before, over listings already read. The next range's counts are
-/// taken ahead ([`sort_range`]) while it is below `ahead_end`, the end of
-/// the job's vertices. Returns the numbers of records and edges written.
+/// count): each range's listings put by vertex ([`sort_range`]), then
+/// its edges emitted from there; its records go to `out` after the ones
+/// before, over listings already read. Returns the numbers of records and
+/// edges written.
 fn emit_ranges<const TRI: bool>(
     out: GroupOut,
     buckets: &Buckets,
     vertices: std::ops::Range<usize>,
-    ahead_end: usize,
     scratch: &mut Scratch,
     simd: bool,
 ) -> (usize, usize) {
@@ -1138,14 +1150,14 @@ fn emit_ranges<const TRI: bool>(
     while v < vertices.end {
         let next = (v + RANGE).min(vertices.end);
         let r = v >> RANGE_SHIFT;
-        let ahead = next < ahead_end;
+        let n = next - v;
         match (buckets.bits, simd) {
             // SAFETY: `simd` is set only where the CPU has BMI2
             // (`simd_available`).
             #[cfg(target_arch = "x86_64")]
-            (Some(_), true) => unsafe { sort_range_bmi2::<u64, TRI>(buckets, r, ahead, scratch) },
-            (Some(_), _) => sort_range::<u64, TRI, false>(buckets, r, ahead, scratch),
-            (None, _) => sort_range::<[u32; 3], TRI, false>(buckets, r, ahead, scratch),
+            (Some(_), true) => unsafe { sort_range_bmi2::<u64, TRI>(buckets, r, n, scratch) },
+            (Some(_), _) => sort_range::<u64, TRI, false>(buckets, r, n, scratch),
+            (None, _) => sort_range::<[u32; 3], TRI, false>(buckets, r, n, scratch),
         }
         let o = GroupOut {
             opp: opp.wrapping_add(records),
@@ -1158,13 +1170,14 @@ fn emit_ranges<const TRI: bool>(
             edges: 0,
         };
         let listings = Listings {
-            start: &scratch.start[..],
+            fill: &scratch.fill[..n],
             first: v,
-            pairs: &scratch.pairs,
-            tri: &scratch.tri,
+            pairs: &scratch.pairs[slots_at(&scratch.pairs)..][..n * SLOTS],
+            tri: &scratch.tri[..if TRI { n * SLOTS } else { 0 }],
+            spill: &scratch.spill,
             narrow: buckets.narrow,
         };
-        let (rn, en) = emit_group::<TRI>(o, &listings, v..next, &mut scratch.records, simd);
+        let (rn, en) = emit_group::<TRI>(o, &listings, v..next, &mut scratch.buf, simd);
         records += rn;
         edges += en;
         v = next;
@@ -1180,7 +1193,7 @@ fn emit_group<const TRI: bool>(
     out: GroupOut,
     listings: &Listings,
     vertices: std::ops::Range<usize>,
-    buf: &mut Vec<[u32; 4]>,
+    buf: &mut EmitBuf,
     simd: bool,
 ) -> (usize, usize) {
     #[cfg(target_arch = "x86_64")]
@@ -1205,12 +1218,32 @@ fn emit_range<const TRI: bool>(
     mut out: GroupOut,
     listings: &Listings,
     vertices: std::ops::Range<usize>,
-    buf: &mut Vec<[u32; 4]>,
+    buf: &mut EmitBuf,
 ) -> (usize, usize) {
+    let mut spilled = 0;
     for v in vertices {
-        let (from, to) = listings.of(v);
-        let listed = &listings.pairs[from..to];
-        emit_vertex::<TRI>(&mut out, v as u32, from, listed, listings.tri, buf);
+        let (from, l) = listings.of(v);
+        if l <= SLOTS {
+            let listed = &listings.pairs[from..from + l];
+            emit_vertex::<TRI>(
+                &mut out,
+                v as u32,
+                from,
+                listed,
+                listings.tri,
+                &mut buf.records,
+            );
+        } else {
+            listings.gather(v, l, &mut spilled, buf);
+            emit_vertex::<TRI>(
+                &mut out,
+                v as u32,
+                0,
+                &buf.pairs,
+                &buf.tri,
+                &mut buf.records,
+            );
+        }
     }
     (out.records, out.edges)
 }
@@ -1359,7 +1392,7 @@ unsafe fn emit_range_avx512(
     mut out: GroupOut,
     listings: &Listings,
     vertices: std::ops::Range<usize>,
-    buf: &mut Vec<[u32; 4]>,
+    buf: &mut EmitBuf,
 ) -> (usize, usize) {
     use std::arch::x86_64::*;
     debug_assert!(
@@ -1483,25 +1516,16 @@ unsafe fn emit_range_avx512(
         out.records += k;
         out.edges += edges;
     };
+    let mut spilled = 0;
     for v in vertices {
-        let (from, to) = listings.of(v);
-        let l = to - from;
+        let (from, l) = listings.of(v);
         if l <= 8 {
-            let listed = &listings.pairs[from..to];
-            // A whole load where 8 listings from `from` lie inside
-            // `pairs`, as for the stores below: the emit pass's median
-            // went 11.5 → 11.1 ms on the dragon (five alternations) and
-            // 70.5 → 63.5 ms on the 5M scene (three).
-            // SAFETY: a whole load reads 8 listings from `from` only
-            // inside `pairs`; else the mask keeps the lanes past `listed`
-            // from being read.
-            let x = unsafe {
-                if from + 8 <= listings.pairs.len() {
-                    _mm512_loadu_si512(listed.as_ptr().cast())
-                } else {
-                    _mm512_maskz_loadu_epi64(((1u32 << l) - 1) as u8, listed.as_ptr().cast())
-                }
-            };
+            // The vertex's 8 slots in one load, whatever its number of
+            // listings (the lanes past them are not looked at).
+            const { assert!(SLOTS == 8) };
+            let slots = &listings.pairs[from..from + SLOTS];
+            // SAFETY: the load reads the 64 bytes of `slots`.
+            let x = unsafe { _mm512_loadu_si512(slots.as_ptr().cast()) };
             let swapped = _mm512_ror_epi64::<32>(x);
             // Word 2j is listing j's p (always a record's larger endpoint),
             // word 2j + 1 its q (a record's where p < q); words past the
@@ -1573,8 +1597,15 @@ unsafe fn emit_range_avx512(
             }
             continue;
         }
-        let listed = &listings.pairs[from..to];
-        emit_vertex::<false>(&mut out, v as u32, from, listed, listings.tri, buf);
+        listings.gather(v, l, &mut spilled, buf);
+        emit_vertex::<false>(
+            &mut out,
+            v as u32,
+            0,
+            &buf.pairs,
+            &buf.tri,
+            &mut buf.records,
+        );
     }
     (out.records, out.edges)
 }
@@ -2218,11 +2249,20 @@ mod tests {
             under[(lo - first) as usize].push([mid, hi]);
             under[(mid - first) as usize].push([hi, lo]);
         }
-        let mut start = vec![0u32];
-        let mut pairs = Vec::new();
-        for l in &under {
-            pairs.extend_from_slice(l);
-            start.push(pairs.len() as u32);
+        // The layout `sort_range` makes: each vertex's first listings in
+        // its slots, the rest spilled, by vertex.
+        let mut fill = Vec::new();
+        let mut pairs = vec![[0u32; 2]; under.len() * SLOTS];
+        let mut spill = Vec::new();
+        for (p, l) in under.iter().enumerate() {
+            fill.push(l.len() as u32);
+            for (c, &pair) in l.iter().enumerate() {
+                if c < SLOTS {
+                    pairs[p * SLOTS + c] = pair;
+                } else {
+                    spill.push((p as u32, pair, 0));
+                }
+            }
         }
         let n = tris.len(); // (3 records per triangle at most)
         let mut opp = vec![UNWRITTEN; n];
@@ -2241,13 +2281,14 @@ mod tests {
             edges: 0,
         };
         let listings = Listings {
-            start: &start,
+            fill: &fill,
             first: first as usize,
             pairs: &pairs,
             tri: &[],
+            spill: &spill,
             narrow: true,
         };
-        let mut buf = Vec::new();
+        let mut buf = EmitBuf::default();
         let vertices = first as usize..last as usize + 1;
         let (records, edges) = if simd {
             // SAFETY: the caller checked `simd_available`.
