@@ -534,6 +534,158 @@ const MAX_BUCKETS: usize = 1 << 10;
 /// noise).
 const SCATTER_AHEAD: usize = 16;
 
+/// Keys of the smallest and largest finite x of `c` (`u32::MAX` and 0 when
+/// there is none): unreferenced vertices may hold anything, and non-finite
+/// x go to the first or last bucket of [`sort_vertices`].
+///
+/// A non-finite x folds in the neutral keys instead of being filtered out,
+/// so the fold vectorises: the 5M scene's sort 59.4–59.9 → 54.5–55.6 ms,
+/// the dragon's 10.4–11.4 → 10.1–11.2 ms (one thread, `RECYCLE=1 cargo run
+/// --release --example stage_probe -- weld`, three alternations).
+#[inline(always)]
+fn x_range(c: &[[f32; 3]]) -> (u32, u32) {
+    c.iter().fold((u32::MAX, 0), |(lo, hi), p| {
+        let k = order_key(canonical(p[0]));
+        let finite = p[0].is_finite();
+        (
+            lo.min(if finite { k } else { u32::MAX }),
+            hi.max(if finite { k } else { 0 }),
+        )
+    })
+}
+
+/// The linear buckets of x of [`sort_vertices`]: `buckets` of them (`top`
+/// + 1) over the finite x from `xmin`, `scale` buckets per unit.
+struct XBuckets {
+    xmin: f64,
+    scale: f64,
+    top: f64,
+    /// The key of the largest finite x.
+    kmax: u32,
+}
+
+impl XBuckets {
+    /// The bucket of `x`. Non-decreasing in the key: a monotone chain of
+    /// rounded f64 operations, a clamp into the buckets and a truncation,
+    /// which send -inf to the first bucket and +inf to the last; NaN
+    /// (which has a key too) goes by the sign of its key.
+    ///
+    /// Branch-free but for NaN (rare), so that the loop computing every
+    /// vertex's bucket vectorises; with one bucket `top` is 0 and every
+    /// vertex lands in it.
+    #[inline(always)]
+    fn of(&self, x: f32) -> u16 {
+        let t = (x as f64 - self.xmin) * self.scale;
+        let t = if t.is_nan() {
+            if order_key(x) > self.kmax {
+                self.top
+            } else {
+                0.0
+            }
+        } else {
+            t
+        };
+        // SAFETY: not NaN, and clamped into 0..=top (at most
+        // `MAX_BUCKETS - 1`), so finite and in range for u32 and u16.
+        unsafe { t.clamp(0.0, self.top).to_int_unchecked::<u32>() as u16 }
+    }
+}
+
+/// `ids[i]` = the bucket of `c[i]`'s x.
+#[inline(always)]
+fn fill_ids(c: &[[f32; 3]], ids: &mut [u16], bucket: &XBuckets) {
+    for (p, id) in c.iter().zip(ids.iter_mut()) {
+        *id = bucket.of(p[0]);
+    }
+}
+
+/// The vectors [`sort_vertices`]' two vectorised loops ([`x_range`] and
+/// [`fill_ids`]) are compiled for, the widest the CPU has.
+///
+/// Why: the crate is built for the x86-64 baseline, so these loops ran in
+/// 128-bit SSE2 vectors. In AVX-512 ones (where the crate's AVX-512
+/// kernels run), one thread, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run
+/// --release --example stage_probe -- weld FILE`, the sort step: the
+/// dragon 6.30–6.40 → 5.84–5.94 ms (three alternations; with AVX2 only,
+/// 6.05–6.21 ms in a first probe), the 5M scene 34.3–34.8 → 31.9 ms
+/// (two).
+#[derive(Clone, Copy)]
+enum Wide {
+    Base,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Wide {
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if crate::evaluate_simd::have_avx512()
+                && has!("avx512vl")
+                && has!("avx512dq")
+                && has!("avx512bw")
+            {
+                return Wide::Avx512;
+            }
+            if crate::evaluate_simd::have_avx2() {
+                return Wide::Avx2;
+            }
+        }
+        Wide::Base
+    }
+
+    fn x_range(self, c: &[[f32; 3]]) -> (u32, u32) {
+        match self {
+            Wide::Base => x_range(c),
+            // SAFETY: `detect` found the features.
+            #[cfg(target_arch = "x86_64")]
+            Wide::Avx2 => unsafe { wide::x_range_avx2(c) },
+            #[cfg(target_arch = "x86_64")]
+            Wide::Avx512 => unsafe { wide::x_range_avx512(c) },
+        }
+    }
+
+    fn fill_ids(self, c: &[[f32; 3]], ids: &mut [u16], bucket: &XBuckets) {
+        match self {
+            Wide::Base => fill_ids(c, ids, bucket),
+            // SAFETY: `detect` found the features.
+            #[cfg(target_arch = "x86_64")]
+            Wide::Avx2 => unsafe { wide::fill_ids_avx2(c, ids, bucket) },
+            #[cfg(target_arch = "x86_64")]
+            Wide::Avx512 => unsafe { wide::fill_ids_avx512(c, ids, bucket) },
+        }
+    }
+}
+
+/// The copies of [`Wide`].
+#[cfg(target_arch = "x86_64")]
+mod wide {
+    use super::{XBuckets, fill_ids, x_range};
+
+    #[target_feature(enable = "avx2")]
+    pub(super) fn x_range_avx2(c: &[[f32; 3]]) -> (u32, u32) {
+        x_range(c)
+    }
+
+    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512dq,avx512bw")]
+    pub(super) fn x_range_avx512(c: &[[f32; 3]]) -> (u32, u32) {
+        x_range(c)
+    }
+
+    #[target_feature(enable = "avx2")]
+    pub(super) fn fill_ids_avx2(c: &[[f32; 3]], ids: &mut [u16], bucket: &XBuckets) {
+        fill_ids(c, ids, bucket)
+    }
+
+    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512dq,avx512bw")]
+    pub(super) fn fill_ids_avx512(c: &[[f32; 3]], ids: &mut [u16], bucket: &XBuckets) {
+        fill_ids(c, ids, bucket)
+    }
+}
+
 /// Writes the words ([`vertex_word`]) of all `positions` into `words` (as
 /// long), sorted by key, and returns the sorted words in consecutive groups
 /// that share no key, each with its number of distinct keys.
@@ -554,25 +706,13 @@ fn sort_vertices<'w>(
     use rayon::prelude::*;
     let n = positions.len();
     debug_assert_eq!(words.len(), n);
-    // Keys of the smallest and largest finite x; unreferenced vertices may
-    // hold anything, and non-finite x go to the first or last bucket.
-    // A non-finite x folds in the neutral keys instead of being filtered
-    // out, so the fold vectorises: the 5M scene's sort 59.4–59.9 →
-    // 54.5–55.6 ms, the dragon's 10.4–11.4 → 10.1–11.2 ms (one thread,
-    // `RECYCLE=1 cargo run --release --example stage_probe -- weld`, three
-    // alternations).
+    // Keys of the smallest and largest finite x (`x_range`). This fold and
+    // the buckets' loop below run in the widest vectors the CPU has: see
+    // `Wide`.
+    let wide = Wide::detect();
     let (kmin, kmax) = positions
         .par_chunks(VERTEX_BLOCK)
-        .map(|c| {
-            c.iter().fold((u32::MAX, 0), |(lo, hi), p| {
-                let k = order_key(canonical(p[0]));
-                let finite = p[0].is_finite();
-                (
-                    lo.min(if finite { k } else { u32::MAX }),
-                    hi.max(if finite { k } else { 0 }),
-                )
-            })
-        })
+        .map(|c| wide.x_range(c))
         .reduce(|| (u32::MAX, 0), |a, b| (a.0.min(b.0), a.1.max(b.1)));
     let buckets = if kmin < kmax {
         (n / 128).next_power_of_two().clamp(1 << 8, MAX_BUCKETS)
@@ -581,25 +721,11 @@ fn sort_vertices<'w>(
     };
     let (xmin, xmax) = (from_order_key(kmin) as f64, from_order_key(kmax) as f64);
     let scale = buckets as f64 / (xmax - xmin);
-    // Non-decreasing in the key: a monotone chain of rounded f64 operations,
-    // a clamp into the buckets and a truncation, which send -inf to the
-    // first bucket and +inf to the last; NaN (which has a key too) goes by
-    // the sign of its key.
-    //
-    // Branch-free but for NaN (rare), so that the loop computing every
-    // vertex's bucket vectorises; with one bucket `top` is 0 and every
-    // vertex lands in it.
-    let top = (buckets - 1) as f64;
-    let bucket = |x: f32| -> usize {
-        let t = (x as f64 - xmin) * scale;
-        let t = if t.is_nan() {
-            if order_key(x) > kmax { top } else { 0.0 }
-        } else {
-            t
-        };
-        // SAFETY: not NaN, and clamped into 0..=top (at most
-        // `MAX_BUCKETS - 1`), so finite and in range for u32 and u16.
-        unsafe { t.clamp(0.0, top).to_int_unchecked::<u32>() as usize }
+    let bucket = XBuckets {
+        xmin,
+        scale,
+        top: (buckets - 1) as f64,
+        kmax,
     };
 
     // The bucket of every vertex (kept, so the scatter need not compute it
@@ -621,9 +747,7 @@ fn sort_vertices<'w>(
         .map(|(c, ids)| {
             let mut count = vec![0u32; buckets];
             for (c, ids) in c.chunks(VERTEX_BLOCK).zip(ids.chunks_mut(VERTEX_BLOCK)) {
-                for (p, id) in c.iter().zip(ids.iter_mut()) {
-                    *id = bucket(p[0]) as u16;
-                }
+                wide.fill_ids(c, ids, &bucket);
                 for &b in ids.iter() {
                     count[b as usize] += 1;
                 }
@@ -1314,6 +1438,55 @@ mod tests {
                 "{:?}",
                 pos[i]
             );
+        }
+    }
+
+    #[test]
+    fn wide_copies_match_the_base_loops() {
+        // NaN, infinities and both zeros in x, among hard positions and
+        // one lone huge x; every copy the CPU can run gives the base
+        // loop's keys and buckets.
+        let mut pos = hard_positions(3 * VERTEX_BLOCK / 2 + 13, 5);
+        for (i, x) in [
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.0,
+            0.0,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            pos[100 * i + 7][0] = x;
+        }
+        pos[999][0] = 3.0e38;
+        let mut copies = vec![Wide::Base];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx2") {
+                copies.push(Wide::Avx2);
+            }
+            if has!("avx512f") && has!("avx512vl") && has!("avx512dq") && has!("avx512bw") {
+                copies.push(Wide::Avx512);
+            }
+        }
+        let (kmin, kmax) = x_range(&pos);
+        let bucket = XBuckets {
+            xmin: from_order_key(kmin) as f64,
+            scale: 1024.0 / (from_order_key(kmax) as f64 - from_order_key(kmin) as f64),
+            top: 1023.0,
+            kmax,
+        };
+        let mut want = vec![0u16; pos.len()];
+        fill_ids(&pos, &mut want, &bucket);
+        assert!(want.contains(&0) && want.contains(&1023));
+        for wide in copies {
+            assert_eq!(wide.x_range(&pos), (kmin, kmax));
+            let mut ids = vec![u16::MAX; pos.len()];
+            wide.fill_ids(&pos, &mut ids, &bucket);
+            assert!(ids == want, "the buckets");
         }
     }
 
