@@ -750,9 +750,10 @@ impl Scratch {
 /// its 435,545 vertices) lie in one cache line of their own. One thread,
 /// `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release --example
 /// stage_probe -- passes FILE`, the emit pass: the dragon 7.55–7.67 →
-/// 6.87–7.03 ms (three alternations; 6.82–6.85 ms with the slots on a
-/// line boundary, against 6.86–6.90), the 5M scene 39.49–39.61 →
-/// 35.93–36.00 ms (two).
+/// 6.87–7.03 ms (three alternations), then 6.69–6.72 ms with the slots
+/// on a cache-line boundary and the kernel's load of them whole
+/// (against 6.84–6.90 without); the 5M scene 39.63–39.77 → 35.91–36.25
+/// ms (two).
 // Inlined so that `sort_range_bmi2`'s copy is compiled with BMI2, which
 // `Entry::pair_deposited`'s `pdep` needs to be inlined in its loop.
 #[inline(always)]
@@ -2250,9 +2251,11 @@ mod tests {
             under[(mid - first) as usize].push([hi, lo]);
         }
         // The layout `sort_range` makes: each vertex's first listings in
-        // its slots, the rest spilled, by vertex.
+        // its slots, the rest spilled, by vertex. The slots past a
+        // vertex's listings hold what an earlier range left there: here a
+        // listing of other vertices, which would give records if read.
         let mut fill = Vec::new();
-        let mut pairs = vec![[0u32; 2]; under.len() * SLOTS];
+        let mut pairs = vec![[first + 1, first + 2]; under.len() * SLOTS];
         let mut spill = Vec::new();
         for (p, l) in under.iter().enumerate() {
             fill.push(l.len() as u32);

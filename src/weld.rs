@@ -1596,23 +1596,14 @@ mod tests {
             for into in [false, true] {
                 let mut a = words.clone();
                 let mut scratch = vec![0u128; words.len()];
-                if into {
-                    counting_pass::<96, false, true>(
-                        &mut a,
-                        &mut scratch,
-                        &mut Vec::new(),
-                        lo,
-                        hi - lo,
-                    );
-                    a = scratch;
+                let pass = if into {
+                    counting_pass::<96, false, true>
                 } else {
-                    counting_pass::<96, false, false>(
-                        &mut a,
-                        &mut scratch,
-                        &mut Vec::new(),
-                        lo,
-                        hi - lo,
-                    );
+                    counting_pass::<96, false, false>
+                };
+                pass(&mut a, &mut scratch, &mut Vec::new(), lo, hi - lo);
+                if into {
+                    a = scratch;
                 }
                 assert!(
                     a.windows(2).all(|w| key(w[0]) <= key(w[1])),
