@@ -8,7 +8,7 @@
 //! cargo run --release --example stage_probe -- read FILE     # read against map, first touch
 //! cargo run --release --example stage_probe -- build MODEL   # weld, topology, plan, fills
 //! cargo run --release --example stage_probe -- weld MODEL    # the weld and its steps, memory recycled, and std's sort of its words
-//! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes, and fed
+//! cargo run --release --example stage_probe -- passes MODEL  # the topology's four passes, and fed; its listings per vertex
 //! cargo run --release --example stage_probe -- buckets MODEL # weld + topology + bucket counts (the stages bench's `ours_buckets`), then meshoptimizer's adjacency, with their page faults
 //! cargo run --release --example stage_probe -- floor MODEL   # `buckets` with fresh and with recycled memory, and the fresh pages of its output alone, alternated: the fresh-memory floor
 //! cargo run --release --example stage_probe -- fill-write MODEL  # the writer's fills (caps from the welded mesh, with no position read, from the soup), with and without its writes, and its writes alone
@@ -176,7 +176,7 @@ fn read(path: &Path) {
 /// plain topology in another 15 runs, the topology fed as a build with two
 /// threads feeds it (`build_edges_opposites_only_fed`, with a consumer
 /// that only reads how many records there are), whose count pass also
-/// xors its edges' keys.
+/// xors its edges' keys; then the listings per vertex (`listing_counts`).
 fn passes(path: &Path) {
     let soup = svpack::load::load(path).unwrap();
     let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
@@ -221,6 +221,40 @@ fn passes(path: &Path) {
         std::hint::black_box(e);
     }
     println!("fed, as a build with two threads: topology {fed:.2} ms, against {plain:.2} ms plain");
+    listing_counts(&w.triangles, w.positions.len());
+}
+
+/// What pass 3 of the topology meets per vertex: the histogram of its
+/// listings (each triangle is listed under its smallest and middle
+/// corner), how many vertices have more than the 8 slots
+/// (`topology::SLOTS`), and how often the AVX-512 kernel's branch on at
+/// most 4 listings changes between consecutive vertices.
+fn listing_counts(triangles: &[u32], vertices: usize) {
+    let mut listings = vec![0u32; vertices];
+    for t in triangles.chunks_exact(3) {
+        let mut c = [t[0], t[1], t[2]];
+        c.sort_unstable();
+        listings[c[0] as usize] += 1;
+        listings[c[1] as usize] += 1;
+    }
+    let mut hist = [0usize; 10];
+    for &l in &listings {
+        hist[(l as usize).min(9)] += 1;
+    }
+    let flips = listings
+        .windows(2)
+        .filter(|p| (p[0] <= 4) != (p[1] <= 4))
+        .count();
+    let shown: Vec<String> = hist[..9]
+        .iter()
+        .enumerate()
+        .map(|(l, n)| format!("{l}: {n}"))
+        .collect();
+    println!(
+        "listings per vertex: {}, more than 8: {} vertices; the kernel's branch on at most 4 changes {flips} times in {vertices} vertices",
+        shown.join(", "),
+        hist[9]
+    );
 }
 
 /// The evaluator on MODEL's build, one light, as the evaluate bench's
