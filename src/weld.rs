@@ -619,22 +619,30 @@ enum Wide {
 }
 
 impl Wide {
+    /// The widest copy the CPU runs.
     fn detect() -> Self {
+        *Self::available().last().expect("the baseline")
+    }
+
+    /// Every copy the CPU runs, narrowest first (the baseline always).
+    fn available() -> Vec<Self> {
+        #[allow(unused_mut)]
+        let mut copies = vec![Wide::Base];
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
+            if crate::evaluate_simd::have_avx2() {
+                copies.push(Wide::Avx2);
+            }
             if crate::evaluate_simd::have_avx512()
                 && has!("avx512vl")
                 && has!("avx512dq")
                 && has!("avx512bw")
             {
-                return Wide::Avx512;
-            }
-            if crate::evaluate_simd::have_avx2() {
-                return Wide::Avx2;
+                copies.push(Wide::Avx512);
             }
         }
-        Wide::Base
+        copies
     }
 
     fn x_range(self, c: &[[f32; 3]]) -> (u32, u32) {
@@ -1461,17 +1469,7 @@ mod tests {
             pos[100 * i + 7][0] = x;
         }
         pos[999][0] = 3.0e38;
-        let mut copies = vec![Wide::Base];
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::is_x86_feature_detected as has;
-            if has!("avx2") {
-                copies.push(Wide::Avx2);
-            }
-            if has!("avx512f") && has!("avx512vl") && has!("avx512dq") && has!("avx512bw") {
-                copies.push(Wide::Avx512);
-            }
-        }
+        let copies = Wide::available();
         let (kmin, kmax) = x_range(&pos);
         let bucket = XBuckets {
             xmin: from_order_key(kmin) as f64,
