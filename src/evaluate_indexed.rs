@@ -43,12 +43,15 @@ pub const LIGHT_GROUP: usize = 4;
 /// file by [`IndexedCaps::new`]; [`IndexedCaps::cap_signs`] per light.
 #[derive(Debug, Clone)]
 pub struct IndexedCaps {
-    /// The positions the triangles use as `x, y, z, 0` (one 16-byte load
-    /// per corner), in order of first use.
-    points: Vec<[f32; 4]>,
+    /// The positions the triangles use, `x, y, z` each, in order of first
+    /// use, then one float more: a corner is one 16-byte load of its three
+    /// floats and the next one (the next point's `x`, or that last float),
+    /// which no kernel uses (see [`row`]).
+    points: Vec<f32>,
     /// Per triangle, its corners in the order the contract's
-    /// three-comparator network sorts them to, each as twice its id into
-    /// `points` (see [`row`]).
+    /// three-comparator network sorts them to, each as three times its id
+    /// into the positions, the offset of its first float in `points` (see
+    /// [`row`]).
     sorted: Vec<[u32; 3]>,
     /// Per triangle, whether that sort was an odd permutation.
     odd: Vec<bool>,
@@ -82,8 +85,7 @@ impl IndexedCaps {
             return None;
         }
         let n = positions.len();
-        // (Twice an id must fit a u32: see `row`.)
-        if n > 1 << 31 || caps.iter().flatten().any(|&i| i as usize >= n) {
+        if n > MAX_POINTS || caps.iter().flatten().any(|&i| i as usize >= n) {
             return None;
         }
         let (mut sorted, odd): (Vec<[u32; 3]>, Vec<bool>) =
@@ -96,16 +98,17 @@ impl IndexedCaps {
         // before, and is faster after (benches/evaluate.rs,
         // `caps/reference_indexed`).
         let mut rename = vec![u32::MAX; n];
-        let mut points = Vec::with_capacity(n);
+        let mut points = Vec::with_capacity(3 * n + 1);
         for id in sorted.iter_mut().flatten() {
             let r = &mut rename[*id as usize];
             if *r == u32::MAX {
-                *r = points.len() as u32;
-                let p = positions[*id as usize];
-                points.push([p[0], p[1], p[2], 0.0]);
+                *r = (points.len() / 3) as u32;
+                points.extend_from_slice(&positions[*id as usize]);
             }
-            *id = 2 * *r;
+            *id = 3 * *r;
         }
+        // The last row's fourth float (see `row`).
+        points.push(0.0);
         // `positions` is in lexicographic order, so the used ones, renamed,
         // are too.
         let lex = rename.into_iter().filter(|&r| r != u32::MAX).collect();
@@ -132,7 +135,9 @@ impl IndexedCaps {
             && self
                 .lex
                 .binary_search_by(|&i| {
-                    let p = self.points[i as usize];
+                    // SAFETY: `lex` holds ids of `points`' rows (`new`),
+                    // and three times an id is a row's offset.
+                    let p = unsafe { row(&self.points, 3 * i) };
                     for a in 0..3 {
                         if p[a] < l[a] {
                             return Ordering::Less;
@@ -144,6 +149,11 @@ impl IndexedCaps {
                     Ordering::Equal
                 })
                 .is_ok()
+    }
+
+    /// Number of distinct positions the triangles use (rows of `points`).
+    fn rows(&self) -> usize {
+        self.points.len() / 3
     }
 
     /// Number of triangles.
@@ -219,40 +229,42 @@ impl IndexedCaps {
             .for_each(|((o, t), odd)| self.signs_many(t, odd, *lights, on_corner, &mut Pairs(o)));
     }
 
-    /// One chunk of a group of `N` lights into `sink`: AVX2 where the CPU
-    /// has it, else the plain loop (the AVX-512 kernel's gathers, which
-    /// pay on Intel for one light, are shared by the lights here).
-    fn signs_many<const N: usize>(
+    /// One chunk of a group of `N` lights into `sink`, through the widest
+    /// copy of the block loop the CPU runs ([`Kernel::detect`]; the AVX-512
+    /// kernel's gathers, which pay on Intel for one light, are shared by
+    /// the lights here).
+    fn signs_many<const N: usize, S: Sink<N>>(
         &self,
         sorted: &[[u32; 3]],
         odd: &[bool],
         lights: [Light; N],
         on_corner: bool,
-        sink: &mut impl Sink<N>,
+        sink: &mut S,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::have_avx2() {
-            // SAFETY: the CPU has AVX2 (checked just above); every corner
-            // names a row of points (`new` stores them so).
-            return unsafe {
-                if on_corner {
-                    signs_many_avx2::<true, N, _>(&self.points, sorted, odd, lights, sink)
-                } else {
-                    signs_many_avx2::<false, N, _>(&self.points, sorted, odd, lights, sink)
-                }
-            };
+        let form = Form::of(&lights, on_corner);
+        // SAFETY: `detect` gives a copy the CPU runs; every corner names a
+        // row of points (`new` stores them so); `sink` holds `sorted.len()`
+        // triangles (the callers cut both into the same chunks).
+        unsafe {
+            run(
+                Kernel::detect(),
+                form,
+                &self.points,
+                sorted,
+                odd,
+                lights,
+                sink,
+            )
         }
-        // SAFETY: every corner names a row of points (`new` stores them so).
-        unsafe { signs_many_impl::<false, true, N, _>(&self.points, sorted, odd, lights, sink) }
     }
 
     /// One chunk, through the AVX-512 version where its gathers pay
     /// (`evaluate_simd::gather_caps`) and the table's float offsets fit
     /// their 32-bit indices (with the light-on-corner test only when
-    /// `on_corner`), else AVX2, else the plain loop.
+    /// `on_corner`), else through [`IndexedCaps::signs_many`]'s copies.
     fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, on_corner: bool, out: &mut [i8]) {
         #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::gather_caps() && self.points.len() <= MAX_GATHER_POINTS {
+        if crate::evaluate_simd::gather_caps() && self.rows() <= MAX_GATHER_POINTS {
             // SAFETY: the CPU has AVX-512F (`gather_caps` checks it); every
             // corner names a row of points (`new` stores them so), whose
             // float offsets fit an i32 (checked just above).
@@ -264,51 +276,196 @@ impl IndexedCaps {
                 }
             };
         }
-        #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::have_avx2() {
-            // SAFETY: the CPU has AVX2 (checked just above); every corner
-            // names a row of points (`new` stores them so).
-            return unsafe {
-                let out = &mut Bytes([out]);
-                if on_corner {
-                    signs_many_avx2::<true, 1, _>(&self.points, sorted, odd, [l], out)
-                } else {
-                    signs_many_avx2::<false, 1, _>(&self.points, sorted, odd, [l], out)
-                }
-            };
-        }
-        // SAFETY: every corner names a row of points (`new` stores them so).
-        unsafe { signs_impl::<false, true>(&self.points, sorted, odd, l, out) }
+        self.signs_many(sorted, odd, [l], on_corner, &mut Bytes([out]));
     }
 }
 
-/// The row of `points` a stored corner `r` (twice the row's id) names.
+/// The copies of the block loop ([`signs_many_impl`]) that the crate
+/// compiles: the same source under three sets of target features.
 ///
-/// Why twice: a row is 16 bytes, and an x86 address scales an index by at
-/// most 8, so a corner stored as its id took a shift before each of the
-/// 24 row loads of an AVX2 block (with the id's load, 48 of the block's
-/// ~150 instructions for one light); stored doubled, each row load
-/// addresses `base + 8·r` itself. With the odd flip on the float
-/// (`evaluate_simd::sorted_sign_off_corners`), the one-light block went
-/// from about 150 to 120 instructions, and the dragon's caps from 1.026,
-/// 1.079 and 1.043 ms to 0.996, 1.026 and 1.036 ms (`RAYON_NUM_THREADS=1
-/// cargo bench --bench evaluate -- 'dragon_full/caps/reference_indexed$'`,
-/// three alternations of the two bench binaries): the shifts were cheap,
-/// and the caps are not bound by instruction count alone.
-///
-/// # Safety
-/// `r / 2` must be below `points.len()`, and `r` even.
-#[inline(always)]
-unsafe fn row(points: &[[f32; 4]], r: u32) -> &[f32; 4] {
-    // SAFETY: the caller's: 8·r bytes on is row r / 2.
-    unsafe {
-        &*points
-            .as_ptr()
-            .cast::<[f32; 2]>()
-            .add(r as usize)
-            .cast::<[f32; 4]>()
+/// Why a copy with AVX-512 on 256-bit vectors: with AVX-512VL and BW the
+/// compiler turns a block's signs into bytes with two compares into mask
+/// registers and two `vpmovm2b` (the AVX2 copy: two extracts and four
+/// packs), and has 32 vector registers instead of 16. On this machine's
+/// Zen 4, where 512-bit vectors run as two halves and the gathers are slow
+/// (see `evaluate_simd::gather_caps`), that copy took the dragon's caps
+/// from 1.002 to 0.919 ms, and with [`Form::OffCornersPoint`] to 0.876
+/// (fastest of 1,000 rounds, the copies alternated in one process, a
+/// scratch probe; benches/ROUNDS.md, thirty-seventh round).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Kernel {
+    /// The baseline's (SSE2 on x86-64): the corners copied lane by lane.
+    Plain,
+    /// AVX2: each corner's row loaded whole, the loads transposed.
+    Avx2,
+    /// The AVX2 copy compiled with AVX-512F, VL, BW and DQ as well.
+    Avx512Vl,
+}
+
+impl Kernel {
+    /// The widest copy the CPU runs (no AVX-512 after
+    /// `evaluate_simd::disable_avx512`).
+    pub(crate) fn detect() -> Kernel {
+        if crate::evaluate_simd::have_avx512vl() {
+            Kernel::Avx512Vl
+        } else if crate::evaluate_simd::have_avx2() {
+            Kernel::Avx2
+        } else {
+            Kernel::Plain
+        }
+    }
+
+    /// Every copy the CPU runs, the plain one first.
+    #[cfg(test)]
+    fn available() -> Vec<Kernel> {
+        let mut v = vec![Kernel::Plain];
+        if crate::evaluate_simd::have_avx2() {
+            v.push(Kernel::Avx2);
+        }
+        if crate::evaluate_simd::have_avx512vl() {
+            v.push(Kernel::Avx512Vl);
+        }
+        v
     }
 }
+
+/// What each lane of the block loop computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Form {
+    /// `sorted_sign_nb`, with the light-on-corner test: for a group where
+    /// some light equals a corner.
+    Tested,
+    /// `sorted_sign_off_corners`: the caller knows no light is on a corner.
+    OffCorners,
+    /// The same for point lights only, each light's `w` replaced by the
+    /// constant 1: the compiler then drops the contract's three products
+    /// `r0·w` (`x · 1` is `x` exactly, NaN included), so the lanes hold
+    /// the same floats with three multiplications fewer per block.
+    OffCornersPoint,
+}
+
+impl Form {
+    /// The form for `lights`: [`Form::Tested`] when `on_corner`.
+    fn of(lights: &[Light], on_corner: bool) -> Form {
+        if on_corner {
+            Form::Tested
+        } else if lights.iter().all(|l| l[3] == 1.0) {
+            Form::OffCornersPoint
+        } else {
+            Form::OffCorners
+        }
+    }
+}
+
+/// [`signs_many_impl`] through copy `kernel` in form `form`.
+///
+/// # Safety
+/// The CPU must run `kernel` ([`Kernel::detect`], [`Kernel::available`]);
+/// every corner of `sorted` must name a row of `points` ([`row`]); `sink`
+/// must hold `sorted.len()` triangles; with [`Form::OffCornersPoint`]
+/// every light's `w` must be 1 (with [`Form::OffCorners`] or
+/// [`Form::OffCornersPoint`], no point light may equal a corner, or those
+/// triangles' signs are the expression's instead of 0).
+unsafe fn run<const N: usize, S: Sink<N>>(
+    kernel: Kernel,
+    form: Form,
+    points: &[f32],
+    sorted: &[[u32; 3]],
+    odd: &[bool],
+    lights: [Light; N],
+    sink: &mut S,
+) {
+    use Form::*;
+    let args = (points, sorted, odd, lights, sink);
+    // SAFETY: the caller's.
+    unsafe {
+        match (kernel, form) {
+            (Kernel::Plain, Tested) => plain::<true, false, N, S>(args),
+            (Kernel::Plain, OffCorners) => plain::<false, false, N, S>(args),
+            (Kernel::Plain, OffCornersPoint) => plain::<false, true, N, S>(args),
+            #[cfg(target_arch = "x86_64")]
+            (Kernel::Avx2, Tested) => avx2::<true, false, N, S>(args),
+            #[cfg(target_arch = "x86_64")]
+            (Kernel::Avx2, OffCorners) => avx2::<false, false, N, S>(args),
+            #[cfg(target_arch = "x86_64")]
+            (Kernel::Avx2, OffCornersPoint) => avx2::<false, true, N, S>(args),
+            #[cfg(target_arch = "x86_64")]
+            (Kernel::Avx512Vl, Tested) => avx512vl::<true, false, N, S>(args),
+            #[cfg(target_arch = "x86_64")]
+            (Kernel::Avx512Vl, OffCorners) => avx512vl::<false, false, N, S>(args),
+            #[cfg(target_arch = "x86_64")]
+            (Kernel::Avx512Vl, OffCornersPoint) => avx512vl::<false, true, N, S>(args),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => plain::<true, false, N, S>(args),
+        }
+    }
+}
+
+/// The arguments of [`signs_many_impl`], as [`run`] passes them on.
+type Args<'a, const N: usize, S> = (&'a [f32], &'a [[u32; 3]], &'a [bool], [Light; N], &'a mut S);
+
+/// [`signs_many_impl`] in the baseline's instructions.
+///
+/// # Safety
+/// As [`run`]'s.
+unsafe fn plain<const TEST: bool, const POINT: bool, const N: usize, S: Sink<N>>(
+    (points, sorted, odd, lights, sink): Args<N, S>,
+) {
+    // SAFETY: the caller's.
+    unsafe { signs_many_impl::<false, TEST, POINT, N, S>(points, sorted, odd, lights, sink) }
+}
+
+/// [`signs_many_impl`] compiled with AVX2.
+///
+/// # Safety
+/// As [`run`]'s; the CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn avx2<const TEST: bool, const POINT: bool, const N: usize, S: Sink<N>>(
+    (points, sorted, odd, lights, sink): Args<N, S>,
+) {
+    // SAFETY: the caller's.
+    unsafe { signs_many_impl::<true, TEST, POINT, N, S>(points, sorted, odd, lights, sink) }
+}
+
+/// [`signs_many_impl`] compiled with AVX2 and AVX-512F, VL, BW and DQ
+/// ([`Kernel::Avx512Vl`]).
+///
+/// # Safety
+/// As [`run`]'s; the CPU must have those features
+/// (`evaluate_simd::have_avx512vl`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
+unsafe fn avx512vl<const TEST: bool, const POINT: bool, const N: usize, S: Sink<N>>(
+    (points, sorted, odd, lights, sink): Args<N, S>,
+) {
+    // SAFETY: the caller's.
+    unsafe { signs_many_impl::<true, TEST, POINT, N, S>(points, sorted, odd, lights, sink) }
+}
+
+/// The four floats of `points` from offset `r`: the row of a stored corner
+/// (three times its id), its `x, y, z` and one float more.
+///
+/// Why 12-byte rows read 16 bytes at a time: the kernels load a corner
+/// whole and transpose the loads, and with rows of `x, y, z, 0` the table
+/// took 16 bytes per point, 7.0 MB on the dragon, with 12 it takes 5.2 MB
+/// (one light reads about 32 MB in all, this CPU's L3 holds 32 MiB). The
+/// offset is the corner itself: an x86 address scales an index by 4, so
+/// each row load addresses `base + 4·r` with no instruction to compute it
+/// (the corners were stored as twice their ids for rows of 16 bytes, for
+/// the same reason, thirtieth round).
+///
+/// # Safety
+/// `r + 4` must be at most `points.len()`.
+#[inline(always)]
+unsafe fn row(points: &[f32], r: u32) -> &[f32; 4] {
+    // SAFETY: the caller's.
+    unsafe { &*points.as_ptr().add(r as usize).cast::<[f32; 4]>() }
+}
+
+/// Most positions a table may hold: three times the largest id (a stored
+/// corner, see [`row`]) fits a `u32`.
+const MAX_POINTS: usize = u32::MAX as usize / 3;
 
 /// Corner `c` of the [`LANES`] triangles `t` into lanes.
 ///
@@ -322,12 +479,7 @@ unsafe fn row(points: &[[f32; 4]], r: u32) -> &[f32; 4] {
 /// # Safety
 /// Every corner of `t` must name a row of `points` (see [`row`]).
 #[inline(always)]
-unsafe fn gather<const AVX2: bool>(
-    points: &[[f32; 4]],
-    t: &[[u32; 3]],
-    c: usize,
-    dst: &mut Corner,
-) {
+unsafe fn gather<const AVX2: bool>(points: &[f32], t: &[[u32; 3]], c: usize, dst: &mut Corner) {
     // SAFETY: the caller's.
     let rows: [&[f32; 4]; LANES] = std::array::from_fn(|i| unsafe { row(points, t[i][c]) });
     #[cfg(target_arch = "x86_64")]
@@ -362,14 +514,16 @@ unsafe fn gather<const AVX2: bool>(
 /// `IndexedCaps::new` stores them).
 #[inline(always)]
 unsafe fn signs_impl<const AVX2: bool, const TEST: bool>(
-    points: &[[f32; 4]],
+    points: &[f32],
     sorted: &[[u32; 3]],
     odd: &[bool],
     l: Light,
     out: &mut [i8],
 ) {
     // SAFETY: the caller's.
-    unsafe { signs_many_impl::<AVX2, TEST, 1, _>(points, sorted, odd, [l], &mut Bytes([out])) }
+    let out = &mut Bytes([out]);
+    // SAFETY: the caller's; `out` holds `sorted.len()` triangles.
+    unsafe { signs_many_impl::<AVX2, TEST, false, 1, _>(points, sorted, odd, [l], out) }
 }
 
 /// The `N` outputs cut into pieces of `chunk` bytes, the pieces at the
@@ -389,8 +543,14 @@ pub(crate) fn chunks_of<const N: usize>(out: [&mut [i8]; N], chunk: usize) -> Ve
 /// Where the kernel puts each light's signs.
 trait Sink<const N: usize> {
     /// The signs of the chunk's block `b` (its triangles `LANES · b ..`),
-    /// per light.
-    fn block(&mut self, b: usize, s: &[[i32; LANES]; N]);
+    /// per light. Unchecked: the bounds checks of the two sinks' slices
+    /// were 6 of the one-light block's 118 instructions, and the dragon's
+    /// caps took 0.915 ms with them and 0.888 without (fastest of eight
+    /// alternated runs of 300 rounds, a scratch probe).
+    ///
+    /// # Safety
+    /// The sink must hold at least `LANES · (b + 1)` triangles.
+    unsafe fn block(&mut self, b: usize, s: &[[i32; LANES]; N]);
     /// The signs of the chunk's triangle `t`, per light.
     fn one(&mut self, t: usize, s: [i32; N]);
 }
@@ -400,10 +560,13 @@ struct Bytes<'a, const N: usize>([&'a mut [i8]; N]);
 
 impl<const N: usize> Sink<N> for Bytes<'_, N> {
     #[inline(always)]
-    fn block(&mut self, b: usize, s: &[[i32; LANES]; N]) {
+    unsafe fn block(&mut self, b: usize, s: &[[i32; LANES]; N]) {
         for (o, s) in self.0.iter_mut().zip(s) {
+            debug_assert!(o.len() >= LANES * (b + 1));
             // An array, so that the eight stores compile to one.
-            let o: &mut [i8; LANES] = (&mut o[LANES * b..][..LANES]).try_into().expect("LANES");
+            // SAFETY: the caller's: bytes `LANES · b ..` of `o` are the
+            // block's.
+            let o = unsafe { &mut *o.as_mut_ptr().add(LANES * b).cast::<[i8; LANES]>() };
             for (o, &s) in o.iter_mut().zip(s) {
                 *o = s as i8;
             }
@@ -435,10 +598,16 @@ fn pair(s: impl Fn(usize) -> i32) -> [u32; 2] {
 
 impl Sink<LIGHT_GROUP> for Pairs<'_> {
     #[inline(always)]
-    fn block(&mut self, b: usize, s: &[[i32; LANES]; LIGHT_GROUP]) {
-        let o: &mut [u32; 2 * LANES] = (&mut self.0[2 * LANES * b..][..2 * LANES])
-            .try_into()
-            .expect("LANES");
+    unsafe fn block(&mut self, b: usize, s: &[[i32; LANES]; LIGHT_GROUP]) {
+        debug_assert!(self.0.len() >= 2 * LANES * (b + 1));
+        // SAFETY: the caller's: entries `2 · LANES · b ..` are the block's.
+        let o = unsafe {
+            &mut *self
+                .0
+                .as_mut_ptr()
+                .add(2 * LANES * b)
+                .cast::<[u32; 2 * LANES]>()
+        };
         for (i, o) in o.chunks_exact_mut(2).enumerate() {
             o.copy_from_slice(&pair(|l| s[l][i]));
         }
@@ -459,11 +628,22 @@ impl Sink<LIGHT_GROUP> for Pairs<'_> {
 /// `sorted_sign_off_corners`) on the same floats as a pass of its own: the
 /// same bits.
 ///
+/// With `POINT`, every light's `w` is taken as the constant 1
+/// ([`Form::OffCornersPoint`]).
+///
 /// # Safety
-/// Every corner of `sorted` must name a row of `points` ([`row`]).
+/// Every corner of `sorted` must name a row of `points` ([`row`]), `sink`
+/// must hold `sorted.len()` triangles, and with `POINT` every light's `w`
+/// must be 1.
 #[inline(always)]
-unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S: Sink<N>>(
-    points: &[[f32; 4]],
+unsafe fn signs_many_impl<
+    const AVX2: bool,
+    const TEST: bool,
+    const POINT: bool,
+    const N: usize,
+    S: Sink<N>,
+>(
+    points: &[f32],
     sorted: &[[u32; 3]],
     odd: &[bool],
     lights: [Light; N],
@@ -473,6 +653,11 @@ unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S:
         // SAFETY: the caller's.
         let p = unsafe { row(points, r) };
         [p[0], p[1], p[2]]
+    };
+    let lights = if POINT {
+        lights.map(|l| [l[0], l[1], l[2], 1.0])
+    } else {
+        lights
     };
     let mut tris = sorted.chunks_exact(LANES);
     let mut odds = odd.chunks_exact(LANES);
@@ -494,7 +679,9 @@ unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S:
                 };
             }
         }
-        sink.block(b, &s);
+        // SAFETY: `b` is a whole block of `sorted`, which the sink holds
+        // (the caller's).
+        unsafe { sink.block(b, &s) };
     }
     let at = sorted.len() - tris.remainder().len();
     for (i, (t, &odd)) in tris.remainder().iter().zip(odds.remainder()).enumerate() {
@@ -503,27 +690,9 @@ unsafe fn signs_many_impl<const AVX2: bool, const TEST: bool, const N: usize, S:
     }
 }
 
-/// [`signs_many_impl`] compiled with AVX2.
-///
-/// # Safety
-/// The CPU must have AVX2, and every corner of `sorted` must name a row
-/// of `points` ([`row`]).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn signs_many_avx2<const TEST: bool, const N: usize, S: Sink<N>>(
-    points: &[[f32; 4]],
-    sorted: &[[u32; 3]],
-    odd: &[bool],
-    lights: [Light; N],
-    sink: &mut S,
-) {
-    // SAFETY: the caller's.
-    unsafe { signs_many_impl::<true, TEST, N, S>(points, sorted, odd, lights, sink) }
-}
-
-/// Most points whose float offsets (`4 · id + 2`) fit the AVX-512 gathers'
+/// Most points whose float offsets (`3 · id + 2`) fit the AVX-512 gathers'
 /// signed 32-bit indices.
-const MAX_GATHER_POINTS: usize = (i32::MAX as usize - 2) / 4;
+const MAX_GATHER_POINTS: usize = (i32::MAX as usize - 2) / 3;
 
 /// Triangles per AVX-512 block: one 512-bit vector of f32 lanes.
 #[cfg(target_arch = "x86_64")]
@@ -544,12 +713,12 @@ const WIDE: usize = 16;
 ///
 /// # Safety
 /// The CPU must have AVX-512F, every corner in `sorted` must name a row of
-/// `points` ([`row`]), and `points.len()` must be at most
-/// [`MAX_GATHER_POINTS`].
+/// `points` ([`row`]), and the table must have at most
+/// [`MAX_GATHER_POINTS`] rows.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2")]
 unsafe fn signs_avx512<const TEST: bool>(
-    points: &[[f32; 4]],
+    points: &[f32],
     sorted: &[[u32; 3]],
     odd: &[bool],
     l: Light,
@@ -564,7 +733,7 @@ unsafe fn signs_avx512<const TEST: bool>(
     let corners = crate::evaluate_simd::TriangleCorners16::new();
     // x (even floats) and y (odd floats) of 2 × 8 gathered pairs.
     let (even, odd_f) = (vector(&|i| 2 * i), vector(&|i| 2 * i + 1));
-    let base = points.as_ptr().cast::<f32>();
+    let base = points.as_ptr();
     let mut blocks = out.chunks_exact_mut(WIDE);
     let mut tris = sorted.chunks_exact(WIDE);
     let mut odds = odd.chunks_exact(WIDE);
@@ -574,12 +743,11 @@ unsafe fn signs_avx512<const TEST: bool>(
         let v = unsafe { [0, 16, 32].map(|at| _mm512_loadu_si512(ids.add(at).cast())) };
         let mut p = [[[0f32; WIDE]; 3]; 3];
         for (c, p) in p.iter_mut().enumerate() {
-            // The corners as stored, twice their ids (see `row`).
-            let twice = corners.corner(&v, c);
-            let off = _mm512_slli_epi32::<1>(twice);
-            // SAFETY: id < points.len() (caller), so 4·id + 0..=2 index the
-            // table's floats and fit an i32 (caller); the 64-bit gathers
-            // read floats 4·id and 4·id + 1.
+            // The corners as stored, their rows' float offsets (see `row`).
+            let off = corners.corner(&v, c);
+            // SAFETY: each offset is 3·id for a row id (caller), so
+            // 3·id + 0..=2 index the table's floats and fit an i32
+            // (caller); the 64-bit gathers read floats 3·id and 3·id + 1.
             unsafe {
                 let lo = _mm512_i32gather_pd::<4>(_mm512_castsi512_si256(off), base.cast());
                 let hi = _mm512_i32gather_pd::<4>(_mm512_extracti64x4_epi64::<1>(off), base.cast());
@@ -652,15 +820,31 @@ mod tests {
         out
     }
 
-    /// Every compiled version of the kernel this machine can run.
-    fn versions(ix: &IndexedCaps, l: Light) -> Vec<(&'static str, Vec<i8>)> {
+    /// Every compiled version of the kernel this machine can run: each
+    /// copy of the block loop in each form that applies to `l`, the
+    /// dispatch, and the AVX-512 gathers' kernel.
+    fn versions(ix: &IndexedCaps, l: Light) -> Vec<(String, Vec<i8>)> {
         let mut v = Vec::new();
         let mut o = vec![0i8; ix.len()];
-        // SAFETY: ids come from `new`.
-        unsafe { signs_impl::<false, true>(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
-        v.push(("plain", o.clone()));
+        let on_corner = ix.light_on_a_corner(l);
+        for kernel in Kernel::available() {
+            for form in [Form::Tested, Form::OffCorners, Form::OffCornersPoint] {
+                // The forms without the test only where no corner is the
+                // light; the point form only for point lights.
+                if form != Form::Tested && on_corner || form == Form::OffCornersPoint && l[3] != 1.0
+                {
+                    continue;
+                }
+                let out = &mut Bytes([&mut o[..]]);
+                // SAFETY: `available` lists the copies this CPU runs; ids
+                // come from `new`; `out` holds every triangle; the light
+                // is a point light for the point form (checked above).
+                unsafe { run(kernel, form, &ix.points, &ix.sorted, &ix.odd, [l], out) };
+                v.push((format!("{kernel:?}, {form:?}"), o.clone()));
+            }
+        }
         ix.cap_signs(l, &mut o);
-        v.push(("dispatch", o.clone()));
+        v.push(("dispatch".to_string(), o.clone()));
         // The dispatch with the gathers' kernel chosen either way (the
         // setting is the process's; other tests running meanwhile only
         // get slower or faster).
@@ -668,39 +852,17 @@ mod tests {
             crate::evaluate_simd::prefer_gather_caps(Some(gathers));
             ix.cap_signs(l, &mut o);
             crate::evaluate_simd::prefer_gather_caps(None);
-            v.push((name, o.clone()));
-        }
-        #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::have_avx2() {
-            // SAFETY: only when the CPU has AVX2; ids come from `new`.
-            unsafe {
-                signs_many_avx2::<true, 1, _>(
-                    &ix.points,
-                    &ix.sorted,
-                    &ix.odd,
-                    [l],
-                    &mut Bytes([&mut o]),
-                )
-            };
-            v.push(("avx2", o.clone()));
-            if !ix.light_on_a_corner(l) {
-                // SAFETY: as above.
-                unsafe {
-                    let out = &mut Bytes([&mut o[..]]);
-                    signs_many_avx2::<false, 1, _>(&ix.points, &ix.sorted, &ix.odd, [l], out)
-                };
-                v.push(("avx2 without the corner test", o.clone()));
-            }
+            v.push((name.to_string(), o.clone()));
         }
         #[cfg(target_arch = "x86_64")]
         if crate::evaluate_simd::have_avx512() {
             // SAFETY: only when the CPU has AVX-512F; ids come from `new`.
             unsafe { signs_avx512::<true>(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
-            v.push(("avx512", o.clone()));
-            if !ix.light_on_a_corner(l) {
+            v.push(("avx512".to_string(), o.clone()));
+            if !on_corner {
                 // SAFETY: as above.
                 unsafe { signs_avx512::<false>(&ix.points, &ix.sorted, &ix.odd, l, &mut o) };
-                v.push(("avx512 without the corner test", o));
+                v.push(("avx512 without the corner test".to_string(), o));
             }
         }
         v

@@ -385,6 +385,24 @@ pub(crate) fn have_avx512() -> bool {
     }
 }
 
+/// True when code compiled with AVX-512F, VL, BW and DQ may run (the caps
+/// kernel's `evaluate_indexed::Kernel::Avx512Vl`): as [`have_avx512`],
+/// with the three other subsets too.
+#[inline]
+pub(crate) fn have_avx512vl() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        have_avx512()
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// Reference orientation of every caps record (12 floats each):
 /// `out[t] = tri_sign(P0, P1, P2, l)` of record `t`, bit for bit.
 /// `data.len()` must be `12 · out.len()`.
