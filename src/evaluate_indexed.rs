@@ -662,6 +662,9 @@ unsafe fn signs_many_impl<
     let mut tris = sorted.chunks_exact(LANES);
     let mut odds = odd.chunks_exact(LANES);
     for (b, (t, odd)) in (&mut tris).zip(&mut odds).enumerate() {
+        // The corners' stream (96 bytes a block, so both of its lines).
+        crate::hint::prefetch_stream(t.as_ptr());
+        crate::hint::prefetch_stream(t.as_ptr().cast::<u8>().wrapping_add(64));
         let mut p = [[[0f32; LANES]; 3]; 3];
         for (c, p) in p.iter_mut().enumerate() {
             // SAFETY: the caller's.

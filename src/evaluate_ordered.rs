@@ -81,6 +81,9 @@ pub const BLOCK: usize = 16;
 /// task (a multiple of [`BLOCK`]).
 const CHUNK: usize = 4096;
 
+/// Evaluation numbers per 64-byte line.
+const LINE: usize = 16;
+
 /// Base of a block the tables do not hold.
 const NOT_PACKED: u32 = u32::MAX;
 
@@ -226,11 +229,16 @@ impl OrderedEvaluation {
         out.par_chunks_mut(CHUNK)
             .zip(self.rank.par_chunks(CHUNK))
             .for_each(|(out, rank)| {
-                for (o, &r) in out.iter_mut().zip(rank) {
-                    // SAFETY: `rank` is a permutation of 0..n (`new`
-                    // numbers each triangle once), so every read is inside
-                    // `signs`.
-                    *o = unsafe { *signs.get_unchecked(r as usize) };
+                // A line of evaluation numbers at a time, the stream
+                // prefetched (`hint::prefetch_stream`).
+                for (out, rank) in out.chunks_mut(LINE).zip(rank.chunks(LINE)) {
+                    crate::hint::prefetch_stream(rank.as_ptr());
+                    for (o, &r) in out.iter_mut().zip(rank) {
+                        // SAFETY: `rank` is a permutation of 0..n (`new`
+                        // numbers each triangle once), so every read is
+                        // inside `signs`.
+                        *o = unsafe { *signs.get_unchecked(r as usize) };
+                    }
                 }
             });
     }
@@ -468,6 +476,17 @@ fn offset(words: &[u64], i: usize) -> usize {
     ((words[i / SLOTS_PER_WORD] >> (16 * (i % SLOTS_PER_WORD))) & 0xFFFF) as usize
 }
 
+/// [`crate::hint::prefetch_stream`] of each line of a block's offsets
+/// (`BLOCK · k` of 2 bytes): the sides read them in order, and the
+/// hardware's prefetch alone left the loops waiting on them (as the
+/// build's passes, see `STREAM_AHEAD`).
+#[inline(always)]
+fn prefetch_offsets(block: &[u64]) {
+    for line in block.chunks(8) {
+        crate::hint::prefetch_stream(line.as_ptr());
+    }
+}
+
 /// Every packed block of `base` (records of `k` slots): each record's sum of
 /// its slots' bytes of `signed`. Inlined into each of the callers' arms, so
 /// that a constant `k` unrolls the slot loop and turns [`offset`]'s word
@@ -483,6 +502,7 @@ unsafe fn blocks(k: usize, signed: &[i8], base: &[u32], offsets: &[u64], out: &m
         .zip(base)
         .zip(offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
     {
+        prefetch_offsets(offsets);
         if b == NOT_PACKED {
             continue;
         }
@@ -525,6 +545,7 @@ unsafe fn group_blocks(
     {
         // Some: each output holds a block per base.
         let mut out = out.each_mut().map(|o| o.next().expect("a block per base"));
+        prefetch_offsets(offsets);
         if b == NOT_PACKED {
             continue;
         }
