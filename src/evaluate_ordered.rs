@@ -32,7 +32,12 @@
 //! writes and 0.85 ms for the sides (2.3–2.5 ms for the sides in input
 //! order with their gathers, the caps computed once). Reading the signs
 //! back instead of writing them took 4.6–12.6% off the whole (thirtieth
-//! round, see [`OrderedEvaluation::cap_signs`]).
+//! round, see [`OrderedEvaluation::cap_signs`]). Thirty-seventh round:
+//! 2.21–2.32 ms at the fastest, 1.69–1.77 ns per side record (the caps'
+//! kernel in 256-bit AVX-512 code, `evaluate_indexed::Kernel`, and the
+//! three streams prefetched, [`crate::hint::prefetch_stream`]: the caps'
+//! corner ids, the evaluation numbers of the reads into input order, the
+//! sides' offsets).
 //!
 //! Per light:
 //! 1. The caps, in evaluation order ([`IndexedCaps`] over the triangles
@@ -87,18 +92,35 @@ const LINE: usize = 16;
 /// Base of a block the tables do not hold.
 const NOT_PACKED: u32 = u32::MAX;
 
+/// Base of a block whose slots span more than 16 bits of the signed table:
+/// its slots' indices are whole `u32`s in [`PackedSlots::wide`], from the
+/// index its first offset word holds. No base of a packed block is this
+/// large: `new` declines 2^31 triangles or more, so every signed-table
+/// index is below 2^32 − 2.
+const WIDE: u32 = u32::MAX - 1;
+
 /// One sides bucket's slots as offsets into the signed table.
 #[derive(Debug, Clone)]
 struct PackedSlots {
     /// Opposite slots per record.
     k: usize,
     /// Per block of [`BLOCK`] records: the smallest signed-table index its
-    /// slots read, or [`NOT_PACKED`].
+    /// slots read, or [`WIDE`], or [`NOT_PACKED`].
     base: Vec<u32>,
     /// Per slot of every whole block: its signed-table index less the
     /// block's base (0 in blocks not packed), 16 bits each, four to a word
-    /// ([`offset`]).
+    /// ([`offset`]); a [`WIDE`] block's first word is where its indices
+    /// start in `wide`.
     offsets: Vec<u64>,
+    /// The signed-table index of every slot of the [`WIDE`] blocks, block
+    /// after block.
+    ///
+    /// Why: on the 5M scene, whose parts lie side by side along x, 15% of
+    /// the side records were in blocks spanning more than 16 bits, and the
+    /// caller evaluated them record by record from the records' floats
+    /// (`evaluate_simd::try_sides_from_caps`): 28% of a profile of its
+    /// evaluation, against 9% for the caps kernel.
+    wide: Vec<u32>,
     /// Record ranges the tables do not hold, in order.
     leftovers: Vec<Range<usize>>,
 }
@@ -326,16 +348,22 @@ impl OrderedEvaluation {
             .zip(b.base.par_chunks(CHUNK / BLOCK))
             .zip(b.offsets.par_chunks(CHUNK * k / SLOTS_PER_WORD))
             .for_each(|((out, base), offsets)| {
-                // SAFETY: every packed block's base + offset is below
-                // 2 · len() (`pack`), which is table.len() (asserted).
+                let slots = Blocks {
+                    base,
+                    offsets,
+                    wide: &b.wide,
+                };
+                // SAFETY: every packed block's base + offset, and every
+                // index of `wide`, is below 2 · len() (`pack`), which is
+                // table.len() (asserted).
                 unsafe {
                     match k {
-                        1 => group_blocks(1, table, base, offsets, out),
-                        2 => group_blocks(2, table, base, offsets, out),
-                        3 => group_blocks(3, table, base, offsets, out),
-                        4 => group_blocks(4, table, base, offsets, out),
-                        5 => group_blocks(5, table, base, offsets, out),
-                        _ => group_blocks(k, table, base, offsets, out),
+                        1 => group_blocks(1, table, slots, out),
+                        2 => group_blocks(2, table, slots, out),
+                        3 => group_blocks(3, table, slots, out),
+                        4 => group_blocks(4, table, slots, out),
+                        5 => group_blocks(5, table, slots, out),
+                        _ => group_blocks(k, table, slots, out),
                     }
                 }
             });
@@ -356,16 +384,22 @@ impl OrderedEvaluation {
             .zip(b.base.par_chunks(CHUNK / BLOCK))
             .zip(b.offsets.par_chunks(CHUNK * k / SLOTS_PER_WORD))
             .for_each(|((out, base), offsets)| {
-                // SAFETY: every packed block's base + offset is below
-                // 2 · len() (`pack`), which is signed.len() (asserted).
+                let slots = Blocks {
+                    base,
+                    offsets,
+                    wide: &b.wide,
+                };
+                // SAFETY: every packed block's base + offset, and every
+                // index of `wide`, is below 2 · len() (`pack`), which is
+                // signed.len() (asserted).
                 unsafe {
                     match k {
-                        1 => blocks(1, signed, base, offsets, out),
-                        2 => blocks(2, signed, base, offsets, out),
-                        3 => blocks(3, signed, base, offsets, out),
-                        4 => blocks(4, signed, base, offsets, out),
-                        5 => blocks(5, signed, base, offsets, out),
-                        _ => blocks(k, signed, base, offsets, out),
+                        1 => blocks(1, signed, slots, out),
+                        2 => blocks(2, signed, slots, out),
+                        3 => blocks(3, signed, slots, out),
+                        4 => blocks(4, signed, slots, out),
+                        5 => blocks(5, signed, slots, out),
+                        _ => blocks(k, signed, slots, out),
                     }
                 }
             });
@@ -410,6 +444,7 @@ fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
     let (blocks, records) = (tri.len() / per_block, tri.len() / k);
     let mut base = vec![NOT_PACKED; blocks];
     let mut offsets = vec![0u64; blocks * per_block / SLOTS_PER_WORD];
+    let mut wide = Vec::new();
     let mut leftovers: Vec<Range<usize>> = Vec::new();
     let mut leave = |r: Range<usize>| match leftovers.last_mut() {
         Some(last) if last.end == r.start => last.end = r.end,
@@ -429,18 +464,22 @@ fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
             .try_fold((u32::MAX, 0), |(lo, hi), (&t, &p)| {
                 index(t, p).map(|i| (lo.min(i), hi.max(i)))
             });
+        let words = &mut offsets[b * per_block / SLOTS_PER_WORD..][..per_block / SLOTS_PER_WORD];
+        // (Some below: every slot of the block was checked by `span`.)
         match span {
             Some((lo, hi)) if hi - lo <= u16::MAX as u32 => {
                 *base = lo;
-                let words =
-                    &mut offsets[b * per_block / SLOTS_PER_WORD..][..per_block / SLOTS_PER_WORD];
                 for (i, (&t, &p)) in tri.iter().zip(parity).enumerate() {
-                    // Some: every slot of the block was checked just above.
                     let o = u64::from(index(t, p).unwrap() - lo);
                     words[i / SLOTS_PER_WORD] |= o << (16 * (i % SLOTS_PER_WORD));
                 }
             }
-            _ => leave(b * BLOCK..(b + 1) * BLOCK),
+            Some(_) => {
+                *base = WIDE;
+                words[0] = wide.len() as u64;
+                wide.extend(tri.iter().zip(parity).map(|(&t, &p)| index(t, p).unwrap()));
+            }
+            None => leave(b * BLOCK..(b + 1) * BLOCK),
         }
     }
     if records > blocks * BLOCK {
@@ -450,6 +489,7 @@ fn pack(k: usize, tri: &[u32], parity: &[i8], rank: &[u32]) -> PackedSlots {
         k,
         base,
         offsets,
+        wide,
         leftovers,
     }
 }
@@ -487,23 +527,60 @@ fn prefetch_offsets(block: &[u64]) {
     }
 }
 
-/// Every packed block of `base` (records of `k` slots): each record's sum of
+/// A run of blocks of one bucket, as a rayon task of the sides takes them:
+/// their bases and offset words, and the bucket's [`PackedSlots::wide`].
+#[derive(Clone, Copy)]
+struct Blocks<'a> {
+    base: &'a [u32],
+    offsets: &'a [u64],
+    wide: &'a [u32],
+}
+
+/// The signed-table indices of a [`WIDE`] block's slots, whose first offset
+/// word is `words[0]`.
+///
+/// # Safety
+/// `words` must be a [`WIDE`] block's offset words and `wide` its bucket's
+/// (`pack` stores `BLOCK · k` indices from the one the word holds).
+#[inline(always)]
+unsafe fn wide_slots<'a>(k: usize, wide: &'a [u32], words: &[u64]) -> &'a [u32] {
+    let at = words[0] as usize;
+    // SAFETY: the caller's.
+    unsafe { wide.get_unchecked(at..at + BLOCK * k) }
+}
+
+/// Every packed block of `slots` (records of `k` slots): each record's sum of
 /// its slots' bytes of `signed`. Inlined into each of the callers' arms, so
 /// that a constant `k` unrolls the slot loop and turns [`offset`]'s word
 /// indices and shifts into constants.
 ///
 /// # Safety
-/// For every block whose base is not [`NOT_PACKED`], base + each of its
-/// offsets must be below `signed.len()`.
+/// For every block whose base is neither [`NOT_PACKED`] nor [`WIDE`], the
+/// base plus each of its offsets must be below `signed.len()`; for every
+/// [`WIDE`] block, its first offset word must name `BLOCK · k` indices of
+/// `wide`, each below `signed.len()`.
 #[inline(always)]
-unsafe fn blocks(k: usize, signed: &[i8], base: &[u32], offsets: &[u64], out: &mut [i8]) {
+unsafe fn blocks(k: usize, signed: &[i8], slots: Blocks, out: &mut [i8]) {
     for ((out, &b), offsets) in out
         .chunks_exact_mut(BLOCK)
-        .zip(base)
-        .zip(offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
+        .zip(slots.base)
+        .zip(slots.offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
     {
         prefetch_offsets(offsets);
         if b == NOT_PACKED {
+            continue;
+        }
+        if b == WIDE {
+            // SAFETY: the caller's.
+            let wide = unsafe { wide_slots(k, slots.wide, offsets) };
+            for (m, idx) in out.iter_mut().zip(wide.chunks_exact(k)) {
+                let mut sum = 0i8;
+                for &i in idx {
+                    // SAFETY: the caller's.
+                    sum = sum.wrapping_add(unsafe { *signed.get_unchecked(i as usize) });
+                }
+                *m = sum;
+            }
             continue;
         }
         let signed = &signed[b as usize..];
@@ -525,23 +602,33 @@ unsafe fn blocks(k: usize, signed: &[i8], base: &[u32], offsets: &[u64], out: &m
     }
 }
 
+/// A record's entries of a group's table summed byte by byte, each byte
+/// wrapping on its own (as i8): the plain `u32` sum of [`group_blocks`]
+/// whenever no byte carries (`k ≤ 127`), and the sum for any `k` (the
+/// bias comes back off after).
+#[inline(always)]
+fn group_sum(entries: impl Iterator<Item = u32>) -> u32 {
+    let mut bytes = [0u8; LIGHT_GROUP];
+    for e in entries {
+        for (b, e) in bytes.iter_mut().zip(e.to_le_bytes()) {
+            *b = b.wrapping_add(e);
+        }
+    }
+    u32::from_le_bytes(bytes)
+}
+
 /// [`blocks`] for a group of lights: each record's sum of its slots'
 /// entries of the group's `table`, one byte per light of `out`.
 ///
 /// # Safety
 /// As [`blocks`], with `table` for `signed`.
 #[inline(always)]
-unsafe fn group_blocks(
-    k: usize,
-    table: &[u32],
-    base: &[u32],
-    offsets: &[u64],
-    out: [&mut [i8]; LIGHT_GROUP],
-) {
+unsafe fn group_blocks(k: usize, table: &[u32], slots: Blocks, out: [&mut [i8]; LIGHT_GROUP]) {
     let mut out = out.map(|o| o.chunks_exact_mut(BLOCK));
-    for (&b, offsets) in base
+    for (&b, offsets) in slots
+        .base
         .iter()
-        .zip(offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
+        .zip(slots.offsets.chunks_exact(BLOCK * k / SLOTS_PER_WORD))
     {
         // Some: each output holds a block per base.
         let mut out = out.each_mut().map(|o| o.next().expect("a block per base"));
@@ -549,9 +636,19 @@ unsafe fn group_blocks(
         if b == NOT_PACKED {
             continue;
         }
-        let table = &table[b as usize..];
         let mut sums = [0u32; BLOCK];
-        if k <= 127 {
+        if b == WIDE {
+            // SAFETY: the caller's.
+            let wide = unsafe { wide_slots(k, slots.wide, offsets) };
+            for (sum, idx) in sums.iter_mut().zip(wide.chunks_exact(k)) {
+                // SAFETY: the caller's.
+                *sum = group_sum(
+                    idx.iter()
+                        .map(|&i| unsafe { *table.get_unchecked(i as usize) }),
+                );
+            }
+        } else if k <= 127 {
+            let table = &table[b as usize..];
             // Each byte of a sum is (1 + s) summed over k slots: at most
             // 2k ≤ 254, so no carry crosses into the next byte.
             for (sums, words) in sums
@@ -567,18 +664,11 @@ unsafe fn group_blocks(
                 }
             }
         } else {
-            // Bytes summed one by one, as i8 (wrapping), then biased back.
+            let table = &table[b as usize..];
             for (r, sum) in sums.iter_mut().enumerate() {
-                let mut bytes = [0u8; LIGHT_GROUP];
-                for j in 0..k {
-                    let o = offset(offsets, r * k + j);
-                    // SAFETY: the caller's.
-                    let e = unsafe { *table.get_unchecked(o) }.to_le_bytes();
-                    for (b, e) in bytes.iter_mut().zip(e) {
-                        *b = b.wrapping_add(e);
-                    }
-                }
-                *sum = u32::from_le_bytes(bytes);
+                let o = |j| offset(offsets, r * k + j);
+                // SAFETY: the caller's.
+                *sum = group_sum((0..k).map(|j| unsafe { *table.get_unchecked(o(j)) }));
             }
         }
         // Light `l`'s byte of each sum, less the bias: a loop LLVM
@@ -664,7 +754,7 @@ mod tests {
         caps: &[[u32; 3]],
         buckets: &[(usize, Vec<u32>, Vec<i8>)],
         l: Light,
-    ) -> (Vec<i8>, Vec<Vec<Option<i8>>>) {
+    ) -> Want {
         let ix = IndexedCaps::new(positions, caps).unwrap();
         let mut signs = vec![0i8; caps.len()];
         ix.cap_signs(l, &mut signs);
@@ -728,6 +818,11 @@ mod tests {
 
     /// A bucket as `new` takes it: slots per record, triangles, parities.
     type Bucket = (usize, Vec<u32>, Vec<i8>);
+
+    /// What [`oracle`] gives for one light: the caps' signs in input
+    /// order, and per bucket each record's multiplicity (None where a slot
+    /// names no triangle).
+    type Want = (Vec<i8>, Vec<Vec<Option<i8>>>);
 
     /// The tests' mesh: 5000 triangles over a table of 3000 points, and
     /// buckets of slot counts 1–4 (specialised) and 6 (the general loop),
@@ -824,6 +919,20 @@ mod tests {
             want.iter()
                 .any(|(_, s)| s[5].iter().flatten().any(|&m| m == -126))
         );
+        check_group(&o, &caps, &buckets, &lights, &want);
+    }
+
+    /// The group path (`group_cap_signs`, then `group_sides` per bucket)
+    /// against `want`, the oracle's signs and sides per light, on one
+    /// thread and two; the records `o` leaves to the caller must be left
+    /// as they are.
+    fn check_group(
+        o: &OrderedEvaluation,
+        caps: &[[u32; 3]],
+        buckets: &[Bucket],
+        lights: &[Light; LIGHT_GROUP],
+        want: &[Want],
+    ) {
         for threads in [1, 2] {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -835,8 +944,8 @@ mod tests {
                 let mut g = got.iter_mut();
                 std::array::from_fn(|_| &mut g.next().unwrap()[..])
             };
-            pool.install(|| o.group_cap_signs(&lights, &mut scratch, out));
-            for (i, (got, (signs, _))) in got.iter().zip(&want).enumerate() {
+            pool.install(|| o.group_cap_signs(lights, &mut scratch, out));
+            for (i, (got, (signs, _))) in got.iter().zip(want).enumerate() {
                 assert!(got == signs, "light {i}: caps differ");
             }
             for (b, (_, tri, _)) in buckets.iter().enumerate() {
@@ -851,7 +960,7 @@ mod tests {
                 for r in o.leftovers(b) {
                     left[r.clone()].iter_mut().for_each(|x| *x = true);
                 }
-                for (i, (m, (_, sides))) in m.iter().zip(&want).enumerate() {
+                for (i, (m, (_, sides))) in m.iter().zip(want).enumerate() {
                     for (r, (&got, &w)) in m.iter().zip(&sides[b]).enumerate() {
                         let w = if left[r] { i8::MIN } else { w.unwrap() };
                         assert_eq!(got, w, "light {i}, bucket {b}, record {r}");
@@ -862,25 +971,52 @@ mod tests {
     }
 
     #[test]
-    fn a_block_spanning_more_than_16_bits_is_left_to_the_caller() {
-        // Records 0..40,000 name triangles 0..40,000 one each (evaluation
-        // numbers in that order); then one block names triangles 0 and
-        // 39,999: 2 · 39,999 apart in the signed table, more than 16 bits.
+    fn blocks_spanning_more_than_16_bits_read_whole_indices() {
+        // Records 0..40,000 name triangles 0..40,000 in order (evaluation
+        // numbers in that order), then blocks naming triangles at both
+        // ends: more than 16 bits apart in the signed table. One slot per
+        // record (one such block); two (the block of the record that names
+        // triangles 39,999 and 0, then two more, odd slots among them, so
+        // that blocks start past the first index of `wide`); 130 (the
+        // group's bytes summed one by one). None is left to the caller.
         let positions = table(3000);
-        let n = 40_000;
-        let caps = triangles(n, positions.len(), 5);
-        let mut tri: Vec<u32> = (0..n as u32).collect();
-        tri.extend((0..BLOCK as u32).map(|r| if r == 3 { n as u32 - 1 } else { r }));
-        let parity = vec![1i8; tri.len()];
-        let buckets = vec![(1, tri, parity)];
-        let slots: Vec<Slots> = buckets
-            .iter()
-            .map(|(k, t, p)| (*k, &t[..], &p[..]))
+        let n = 40_000u32;
+        let caps = triangles(n as usize, positions.len(), 5);
+        let far = |i: u32| if i % 5 == 3 { n - 1 - i % 7 } else { i % 11 };
+        let mut one: Vec<u32> = (0..n).collect();
+        one.extend((0..BLOCK as u32).map(far));
+        let mut two: Vec<u32> = (0..n).flat_map(|t| [t, (t + 1) % n]).collect();
+        two.extend((0..4 * BLOCK as u32).map(far));
+        let many: Vec<u32> = (0..130 * BLOCK as u32).map(far).collect();
+        let buckets: Vec<Bucket> = [(1, one), (2, two), (130, many)]
+            .into_iter()
+            .map(|(k, tri)| {
+                let parity = (0..tri.len()).map(|i| [1, -1, 1][i % 3]).collect();
+                (k, tri, parity)
+            })
             .collect();
-        let o = OrderedEvaluation::new(&positions, &caps, &slots).unwrap();
-        assert_eq!(o.leftovers(0).to_vec(), vec![n..n + BLOCK]);
-        let left = check(&o, &positions, &caps, &buckets, [1.0, 2.0, 3.0, 1.0]);
-        assert_eq!(left, BLOCK);
+        let o = ordered(&positions, &caps, &buckets);
+        for (b, wide_blocks) in [1, 3, 1].into_iter().enumerate() {
+            assert!(o.leftovers(b).is_empty(), "bucket {b}");
+            let slots = &o.buckets[b];
+            let wide = slots.base.iter().filter(|&&x| x == WIDE).count();
+            assert_eq!(wide, wide_blocks, "bucket {b}");
+            assert_eq!(slots.wide.len(), wide * BLOCK * slots.k);
+        }
+        let lights = [
+            [3.0, 2.5, 4.0, 1.0],
+            [-1.0, 0.5, 2.0, 1.0],
+            [0.3, -1.0, 0.2, 0.0],
+            [-10.0, 0.5, -2.0, 1.0],
+        ];
+        for l in lights {
+            assert_eq!(check(&o, &positions, &caps, &buckets, l), 0);
+        }
+        let want: Vec<_> = lights
+            .iter()
+            .map(|&l| oracle(&positions, &caps, &buckets, l))
+            .collect();
+        check_group(&o, &caps, &buckets, &lights, &want);
     }
 
     #[test]
