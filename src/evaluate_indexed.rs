@@ -25,9 +25,11 @@
 //! Several lights ([`IndexedCaps::cap_signs_many`],
 //! [`IndexedCaps::cap_sign_pairs`]) share each block's gathers and
 //! transposes, most of the one-light kernel's instructions: on the dragon,
-//! 0.61–0.64 ms per light in groups of four against 1.11–1.26 ms one at a
+//! 0.48–0.50 ms per light in groups of four against 0.91–0.94 ms one at a
 //! time (one thread, `cargo run --release --example stage_probe --
-//! evaluate target/dragon/dragon.glb`, four runs).
+//! evaluate target/dragon/dragon.glb`, its `four lights, caps alone`
+//! line, three runs, thirty-seventh round; 0.61–0.64 against 1.11–1.26 ms
+//! before that round's [`Kernel::Avx512Vl`] copy).
 
 use crate::evaluate_simd::{Corner, LANES, sorted_sign_nb, sorted_sign_off_corners};
 use crate::multiplicity::{Light, lex_less};
