@@ -377,28 +377,27 @@ unsafe fn run<const N: usize, S: Sink<N>>(
     lights: [Light; N],
     sink: &mut S,
 ) {
-    use Form::*;
     let args = (points, sorted, odd, lights, sink);
+    // The copy `$copy` with the form's `TEST` and `POINT`.
+    macro_rules! in_form {
+        ($copy:ident) => {
+            match form {
+                Form::Tested => $copy::<true, false, N, S>(args),
+                Form::OffCorners => $copy::<false, false, N, S>(args),
+                Form::OffCornersPoint => $copy::<false, true, N, S>(args),
+            }
+        };
+    }
     // SAFETY: the caller's.
     unsafe {
-        match (kernel, form) {
-            (Kernel::Plain, Tested) => plain::<true, false, N, S>(args),
-            (Kernel::Plain, OffCorners) => plain::<false, false, N, S>(args),
-            (Kernel::Plain, OffCornersPoint) => plain::<false, true, N, S>(args),
+        match kernel {
+            Kernel::Plain => in_form!(plain),
             #[cfg(target_arch = "x86_64")]
-            (Kernel::Avx2, Tested) => avx2::<true, false, N, S>(args),
+            Kernel::Avx2 => in_form!(avx2),
             #[cfg(target_arch = "x86_64")]
-            (Kernel::Avx2, OffCorners) => avx2::<false, false, N, S>(args),
-            #[cfg(target_arch = "x86_64")]
-            (Kernel::Avx2, OffCornersPoint) => avx2::<false, true, N, S>(args),
-            #[cfg(target_arch = "x86_64")]
-            (Kernel::Avx512Vl, Tested) => avx512vl::<true, false, N, S>(args),
-            #[cfg(target_arch = "x86_64")]
-            (Kernel::Avx512Vl, OffCorners) => avx512vl::<false, false, N, S>(args),
-            #[cfg(target_arch = "x86_64")]
-            (Kernel::Avx512Vl, OffCornersPoint) => avx512vl::<false, true, N, S>(args),
+            Kernel::Avx512Vl => in_form!(avx512vl),
             #[cfg(not(target_arch = "x86_64"))]
-            _ => plain::<true, false, N, S>(args),
+            _ => in_form!(plain),
         }
     }
 }
