@@ -29,7 +29,7 @@
 //! time (one thread, `cargo run --release --example stage_probe --
 //! evaluate target/dragon/dragon.glb`, its `four lights, caps alone`
 //! line, three runs, thirty-seventh round; 0.61–0.64 against 1.11–1.26 ms
-//! before that round's [`Kernel::Avx512Vl`] copy).
+//! before that round's `Kernel::Avx512Vl` copy).
 
 use crate::evaluate_simd::{Corner, LANES, sorted_sign_nb, sorted_sign_off_corners};
 use crate::multiplicity::{Light, lex_less};
@@ -82,6 +82,8 @@ impl IndexedCaps {
     /// once. `None` when `positions` is not strictly increasing under
     /// [`lex_less`] or an id is out of range: then id order would not be
     /// the contract's order, and the caller must evaluate the records.
+    /// `None` too for more than about 1.43 billion positions, whose rows'
+    /// offsets would not fit the `u32` corners (see `row`).
     pub fn new(positions: &[[f32; 3]], caps: &[[u32; 3]]) -> Option<Self> {
         if !positions.windows(2).all(|w| lex_less(w[0], w[1])) {
             return None;

@@ -35,7 +35,7 @@
 //! round, see [`OrderedEvaluation::cap_signs`]). Thirty-seventh round:
 //! 2.21–2.32 ms at the fastest, 1.69–1.77 ns per side record (the caps'
 //! kernel in 256-bit AVX-512 code, `evaluate_indexed::Kernel`, and the
-//! three streams prefetched, [`crate::hint::prefetch_stream`]: the caps'
+//! three streams prefetched, `hint::prefetch_stream`: the caps'
 //! corner ids, the evaluation numbers of the reads into input order, the
 //! sides' offsets).
 //!
