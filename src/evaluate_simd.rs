@@ -386,8 +386,8 @@ pub(crate) fn have_avx512() -> bool {
 }
 
 /// True when code compiled with AVX-512F, VL, BW and DQ may run (the caps
-/// kernel's `evaluate_indexed::Kernel::Avx512Vl`): as [`have_avx512`],
-/// with the three other subsets too.
+/// kernel's `evaluate_indexed::Kernel::Avx512Vl`, the weld's
+/// `Wide::Avx512`): as [`have_avx512`], with the three other subsets too.
 #[inline]
 pub(crate) fn have_avx512vl() -> bool {
     #[cfg(target_arch = "x86_64")]

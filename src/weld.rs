@@ -630,15 +630,10 @@ impl Wide {
         let mut copies = vec![Wide::Base];
         #[cfg(target_arch = "x86_64")]
         {
-            use std::arch::is_x86_feature_detected as has;
             if crate::evaluate_simd::have_avx2() {
                 copies.push(Wide::Avx2);
             }
-            if crate::evaluate_simd::have_avx512()
-                && has!("avx512vl")
-                && has!("avx512dq")
-                && has!("avx512bw")
-            {
+            if crate::evaluate_simd::have_avx512vl() {
                 copies.push(Wide::Avx512);
             }
         }
