@@ -16,7 +16,11 @@ pub(crate) fn prefetch<T>(p: &T) {
 /// one thread, each unit written, fastest of 6: sides 45.2–45.9 →
 /// 41.8–42.5 ms, caps from the welded mesh 39.7–41.0 → 32.9–33.0 ms; the
 /// dragon's (5 MB, mostly in L3) unchanged (`stage_probe -- fill-write`,
-/// two and three alternations).
+/// two and three alternations). The sides' loop of the thirty-eighth
+/// round asks for one end of each row (faster there: see
+/// `layout::fill_sides`); the caps' still need both (the 5M scene's caps
+/// from the welded mesh 24.1 ms with both ends, 31.6–33.0 with one:
+/// `stage_probe -- build`, two alternations).
 #[inline(always)]
 pub(crate) fn prefetch_whole<T>(p: &T) {
     let start = p as *const T as *const u8;

@@ -244,6 +244,19 @@ impl Plan {
 
 /// [`Plan::fill_sides`] for `max_mult` K, from `edges` as slices (all of
 /// them, or a finished prefix that holds block `blk`).
+///
+/// One loop over the block's edges, reading the four edge arrays by index,
+/// with the two-opposite case (almost every edge of a closed mesh) written
+/// by [`put_rows`]. Until the thirty-eighth round this loop took each
+/// edge's opposites as a slice, the pair by a slice pattern, and
+/// prefetched both ends of each row through bounds-checked lookups; the
+/// old loop without any position load took 9.3 of its 9.4 ms on the
+/// dragon (a scratch probe): its cost was its control, not the table.
+/// One thread, `RECYCLE=1 cargo run --release --example stage_probe --
+/// build FILE` (fills into reused buffers, as the writer's), the binaries
+/// of the round's base and of this loop alternated: the dragon's sides
+/// 8.99–9.71 → 6.51–6.57 ms (three alternations), the 5M scene's
+/// 53.3–54.3 → 40.3 ms (two).
 fn fill_sides(
     max_mult: u32,
     welded: &Welded,
@@ -252,44 +265,113 @@ fn fill_sides(
     outs: &mut [&mut [f32]],
 ) {
     let k_max = max_mult as usize;
-    let pos = &welded.positions;
+    let pos = &welded.positions[..];
+    let EdgeSlices {
+        a,
+        b,
+        opp_start,
+        opp,
+    } = edges;
+    let len = edges.len();
+    // (Clamped so that the prefetches' reads stay inside the arrays; the
+    // loop body runs only when there is an edge, so `len >= 1` there.)
+    let last_pair = opp.len().saturating_sub(2);
     let mut at = [0usize; MAX_MAX_MULT as usize + 1];
-    for e in blk * BLOCK..((blk + 1) * BLOCK).min(edges.len()) {
-        if let (Some(&b), Some(&s)) = (edges.b.get(e + AHEAD), edges.opp_start.get(e + AHEAD)) {
-            prefetch_whole(&pos[b as usize]);
-            for &o in edges.opp.get(s as usize..).unwrap_or(&[]).iter().take(2) {
-                prefetch_whole(&pos[o as usize]);
-            }
+    for e in blk * BLOCK..((blk + 1) * BLOCK).min(len) {
+        // The rows of an edge `AHEAD` on: its B and its first two
+        // opposites. One prefetch per row, not both ends of it (a row
+        // straddles two lines once in eight), unlike the caps': in this
+        // loop 6.98 → 6.14 ms on the dragon, 41.8 → 38.6 ms on the 5M
+        // scene (the scratch probe); 32 edges ahead measured the same, 16
+        // and 128 slower, no prefetch 54.3 ms on the 5M scene.
+        let ahead = (e + AHEAD).min(len - 1);
+        prefetch_row(pos, b[ahead]);
+        if opp.len() >= 2 {
+            let s = (opp_start[ahead] as usize).min(last_pair);
+            prefetch_row(pos, opp[s]);
+            prefetch_row(pos, opp[s + 1]);
         }
-        let a = pos[edges.a[e] as usize];
-        let b = pos[edges.b[e] as usize];
-        let opp = edges.opposites(e);
-        if let ([o0, o1], true) = (opp, k_max >= 2) {
-            // An edge of two triangles, almost every edge of a closed
-            // mesh: one record of k = 2, written whole. The general
-            // loop below took the dragon's sides 6.5 ms (7.0 with the
-            // caches emptied first), this 5.1 (5.7); a local probe.
-            let (o0, o1) = (pos[*o0 as usize], pos[*o1 as usize]);
+        let (s, t) = (opp_start[e] as usize, opp_start[e + 1] as usize);
+        if t.wrapping_sub(s) == 2 && k_max >= 2 {
+            // An edge of two triangles: one record of k = 2.
             let out = &mut outs[2][at[2]..at[2] + 16];
             at[2] += 16;
-            out.copy_from_slice(&[
-                a[0], a[1], a[2], 2.0, b[0], b[1], b[2], 2.0, o0[0], o0[1], o0[2], 1.0, o1[0],
-                o1[1], o1[2], 1.0,
-            ]);
+            let ids = [a[e], b[e], opp[s], opp[s + 1]];
+            put_rows::<4, false>(pos, ids, [2.0, 2.0, 1.0, 1.0], out);
             continue;
         }
+        let (pa, pb) = (pos[a[e] as usize], pos[b[e] as usize]);
+        let opp = &opp[s..t];
         let n = opp.len() as f32;
         for chunk in opp.chunks(k_max) {
             let k = chunk.len();
             let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
             at[k] += (2 + k) * 4;
-            out[..4].copy_from_slice(&[a[0], a[1], a[2], k as f32]);
-            out[4..8].copy_from_slice(&[b[0], b[1], b[2], n]);
+            out[..4].copy_from_slice(&[pa[0], pa[1], pa[2], k as f32]);
+            out[4..8].copy_from_slice(&[pb[0], pb[1], pb[2], n]);
             for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
                 let o = pos[o as usize];
                 slot.copy_from_slice(&[o[0], o[1], o[2], 1.0]);
             }
         }
+    }
+}
+
+/// Asks for the line of position `i` of `pos` (no bounds: a prefetch
+/// never faults).
+#[inline(always)]
+fn prefetch_row(pos: &[[f32; 3]], i: u32) {
+    crate::hint::prefetch_ptr(pos.as_ptr().wrapping_add(i as usize));
+}
+
+/// Writes rows `ids` of `pos` into `out` (4 floats each) with the given
+/// `w`s: an edge of two opposite vertices' side record (`[A, B, O0, O1]`,
+/// `w` = 2, 2, 1, 1) or a triangle's caps record (`w` = 1). With `CANON`,
+/// each float becomes `weld::canonical`'s (`+ 0.0`: -0.0 becomes +0.0,
+/// every other value stays itself), for rows read from the soup.
+///
+/// On x86-64, each row by one 16-byte load (its three floats and the next
+/// row's first), its `w` put in by a mask and an or, and one 16-byte store:
+/// a row's two loads and four stores become one and one. In the sides'
+/// old loop alone this took the dragon's sides 9.4–10.1 → 8.2–8.5 ms and
+/// the 5M scene's 57.0–59.3 → 51.1 ms (a scratch probe alternating the
+/// two in one process); the caps from the welded mesh 2.62–2.69 →
+/// 2.12–2.27 ms (`stage_probe -- build` as in [`fill_sides`]). A row read
+/// whole must not be the table's last, whose 16 bytes would run past its
+/// end: a record naming it is copied float by float.
+#[inline(always)]
+fn put_rows<const N: usize, const CANON: bool>(
+    pos: &[[f32; 3]],
+    ids: [u32; N],
+    w: [f32; N],
+    out: &mut [f32],
+) {
+    assert_eq!(out.len(), 4 * N);
+    #[cfg(target_arch = "x86_64")]
+    if ids.iter().all(|&i| (i as usize) + 1 < pos.len()) {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of x86-64. Each row's 16 bytes lie inside
+        // the table (its index is below the last), and `out` holds the
+        // 4 · N floats stored.
+        unsafe {
+            let keep = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+            let rows = pos.as_ptr().cast::<f32>();
+            let dst = out.as_mut_ptr();
+            for j in 0..N {
+                let mut v = _mm_loadu_ps(rows.add(3 * ids[j] as usize));
+                if CANON {
+                    v = _mm_add_ps(v, _mm_setzero_ps());
+                }
+                let v = _mm_or_ps(_mm_and_ps(v, keep), _mm_setr_ps(0.0, 0.0, 0.0, w[j]));
+                _mm_storeu_ps(dst.add(4 * j), v);
+            }
+        }
+        return;
+    }
+    for ((slot, &i), &w) in out.chunks_exact_mut(4).zip(&ids).zip(&w) {
+        let p = pos[i as usize];
+        let p = if CANON { p.map(|f| f + 0.0) } else { p };
+        slot.copy_from_slice(&[p[0], p[1], p[2], w]);
     }
 }
 
@@ -305,10 +387,9 @@ fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
     let pos = &welded.positions[..];
     let end = ((blk + 1) * BLOCK).min(welded.triangle_count());
     let tris = &welded.triangles[3 * blk * BLOCK..3 * end];
-    let out: &mut [[f32; 4]] = bytemuck::cast_slice_mut(out);
     let ahead = tris.get(3 * AHEAD..).unwrap_or(&[]);
     for (i, (rec, c)) in out
-        .chunks_exact_mut(3)
+        .chunks_exact_mut(12)
         .zip(tris.chunks_exact(3))
         .enumerate()
     {
@@ -324,10 +405,7 @@ fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
                 prefetch_whole(&pos[v as usize]);
             }
         }
-        for (slot, &v) in rec.iter_mut().zip(c) {
-            let p = pos[v as usize];
-            *slot = [p[0], p[1], p[2], 1.0];
-        }
+        put_rows::<3, false>(pos, [c[0], c[1], c[2]], [1.0; 3], rec);
     }
 }
 
@@ -438,12 +516,12 @@ impl PayloadSource for SoupCaps<'_> {
     }
 
     fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
-        let out: &mut [[f32; 4]] = bytemuck::cast_slice_mut(outs[0]);
+        let out = &mut *outs[0];
         let first = unit * BLOCK;
         let mut d = self.dropped_before(first);
         let mut t = first + d;
         let pos = self.positions;
-        for rec in out.chunks_exact_mut(3) {
+        for rec in out.chunks_exact_mut(12) {
             // Past the dropped triangles here (none, in most meshes).
             while self.dropped.get(d) == Some(&(t as u32)) {
                 d += 1;
@@ -455,12 +533,8 @@ impl PayloadSource for SoupCaps<'_> {
             // fill-write`, medians: the dragon's caps 3.82 → 3.42 ms, the
             // 5M scene's 15.2 → 11.5 ms.
             prefetch_stream(c.as_ptr());
-            for (slot, &v) in rec.iter_mut().zip(c) {
-                // `+ 0.0` is `weld::canonical`: -0.0 + 0.0 is +0.0, and
-                // every other value stays itself.
-                let p = pos[v as usize];
-                *slot = [p[0] + 0.0, p[1] + 0.0, p[2] + 0.0, 1.0];
-            }
+            // (Canonical, as `weld` decodes a kept corner's position.)
+            put_rows::<3, true>(pos, [c[0], c[1], c[2]], [1.0; 3], rec);
             t += 1;
         }
     }
@@ -756,6 +830,95 @@ mod tests {
             }
             assert_eq!(plan.block_counts.len(), 3);
             assert_eq!(plan.counts, total, "K {k}");
+        }
+    }
+
+    #[test]
+    fn rows_read_whole_equal_rows_copied_float_by_float() {
+        // Row 3, the table's last, is copied float by float (its 16 bytes
+        // would run past the table); the others are read 16 bytes at a
+        // time on x86-64. `-0.0` in every lane, so that canonical rows
+        // (+0.0) differ from plain ones.
+        let pos = [
+            [-0.0, 1.0, 2.0],
+            [3.0, -0.0, -5.0],
+            [6.0, f32::MIN_POSITIVE, -0.0],
+            [-0.0, -1.5, -0.0],
+        ];
+        let want = |ids: &[u32], w: &[f32], canon: bool| -> Vec<u32> {
+            ids.iter()
+                .zip(w)
+                .flat_map(|(&i, &w)| {
+                    let p = pos[i as usize];
+                    let f = |x: f32| if canon && x == 0.0 { 0.0 } else { x };
+                    [f(p[0]), f(p[1]), f(p[2]), w]
+                })
+                .map(f32::to_bits)
+                .collect()
+        };
+        let bits = |out: &[f32]| out.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        for ids in [[0, 1, 2, 3], [3, 2, 1, 0], [1, 1, 2, 2], [3, 3, 3, 3]] {
+            let mut out = [f32::NAN; 16];
+            put_rows::<4, false>(&pos, ids, [2.0, 2.0, 1.0, 1.0], &mut out);
+            assert_eq!(
+                bits(&out),
+                want(&ids, &[2.0, 2.0, 1.0, 1.0], false),
+                "{ids:?}"
+            );
+            let mut out = [f32::NAN; 12];
+            let ids = [ids[0], ids[1], ids[2]];
+            put_rows::<3, true>(&pos, ids, [1.0; 3], &mut out);
+            assert_eq!(
+                bits(&out),
+                want(&ids, &[1.0; 3], true),
+                "{ids:?}, canonical"
+            );
+            put_rows::<3, false>(&pos, ids, [1.0; 3], &mut out);
+            assert_eq!(
+                bits(&out),
+                want(&ids, &[1.0; 3], false),
+                "{ids:?}, as stored"
+            );
+        }
+    }
+
+    /// The table's last row ends a page whose next page cannot be read: a
+    /// 16-byte load of that row (4 bytes past the table) would fault.
+    /// Caught: the whole-row loads allowed for the last row (the test
+    /// process killed by SIGSEGV).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_last_row_is_never_read_past_its_end() {
+        // SAFETY: two fresh anonymous pages, the second made unreadable;
+        // the table lies inside the first, and both are unmapped at the end.
+        unsafe {
+            let page = libc::sysconf(libc::_SC_PAGESIZE) as usize;
+            let base = libc::mmap(
+                std::ptr::null_mut(),
+                2 * page,
+                libc::PROT_READ | libc::PROT_WRITE,
+                libc::MAP_PRIVATE | libc::MAP_ANONYMOUS,
+                -1,
+                0,
+            );
+            assert_ne!(base, libc::MAP_FAILED);
+            assert_eq!(
+                libc::mprotect(base.cast::<u8>().add(page).cast(), page, libc::PROT_NONE),
+                0
+            );
+            let n = 5;
+            let rows = base.cast::<u8>().add(page - 12 * n).cast::<[f32; 3]>();
+            for i in 0..n {
+                rows.add(i).write([i as f32, -0.0, 0.5]);
+            }
+            let pos = std::slice::from_raw_parts(rows, n);
+            let mut out = [0f32; 16];
+            put_rows::<4, false>(pos, [3, 4, 4, 0], [2.0, 2.0, 1.0, 1.0], &mut out);
+            assert_eq!(out[4..8], [4.0, -0.0, 0.5, 2.0]);
+            let mut out = [0f32; 12];
+            put_rows::<3, true>(pos, [4, 1, 2], [1.0; 3], &mut out);
+            assert_eq!(out[..4], [4.0, 0.0, 0.5, 1.0]);
+            assert_eq!(libc::munmap(base, 2 * page), 0);
         }
     }
 
