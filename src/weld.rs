@@ -1131,17 +1131,19 @@ fn weld_passes(
         .zip(out.par_chunks_mut(3 * part_len))
         .enumerate()
         .map(|(part, (tris, out))| {
-            // The marks' pointer and each triangle's corners in locals:
-            // a byte stored through a pointer may alias anything, so with
-            // them read from `marks_at` and `c` the compiler loaded both
-            // again after every mark. `RECYCLE=1 RAYON_NUM_THREADS=T cargo
-            // run --release --example stage_probe -- weld FILE`, the
-            // triangles step, binaries alternated: the dragon, one thread
-            // 2.23–2.26 → 2.08–2.22 ms (three), two threads 1.30–1.32 →
-            // 1.18–1.21 ms (three); the 5M scene, one thread 13.62–13.81
-            // → 13.44–13.49 ms (two).
+            // The marks' pointer, `run` as a slice and each triangle's
+            // corners in locals: a byte stored through a pointer may alias
+            // anything, so with them read through `marks_at`, the captured
+            // `Vec` and `c`, the compiler loaded the pointers, `run`'s
+            // length and the corners again after every mark. `RECYCLE=1
+            // RAYON_NUM_THREADS=T cargo run --release --example
+            // stage_probe -- weld FILE`, the triangles step, binaries
+            // alternated: the dragon, one thread 2.22–2.24 → 1.77–1.79 ms
+            // (three), two threads 1.35–1.43 → 1.03–1.12 ms (three); the
+            // 5M scene, one thread 13.60–13.78 → 9.79–9.82 ms (two).
             let marks_at = &marks_at;
             let marks = marks_at.0;
+            let run: &[u32] = &run;
             let first = part * part_len;
             let (mut kept, mut dropped) = (0, Vec::new());
             for (i, c) in tris.chunks_exact(3).enumerate() {
