@@ -1390,7 +1390,7 @@ fn emit_vertex<const TRI: bool>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,popcnt")]
 unsafe fn emit_range_avx512(
-    mut out: GroupOut,
+    mut group: GroupOut,
     listings: &Listings,
     vertices: std::ops::Range<usize>,
     buf: &mut EmitBuf,
@@ -1445,7 +1445,7 @@ unsafe fn emit_range_avx512(
     // `sorted` their keys, `after` keys whose first is the key after them
     // (all ones for none), `opp_lo` and `opp_hi` the vertex's opposite
     // vertices by rank.
-    let finish = |out: &mut GroupOut,
+    let finish = |out: &mut KernelOut,
                   sorted: __m256i,
                   after: __m256i,
                   opp_lo: __m256i,
@@ -1479,9 +1479,9 @@ unsafe fn emit_range_avx512(
         unsafe {
             _mm256_mask_storeu_epi32(out.opp.add(out.records).cast(), kmask, opposite);
             let (a, b, e) = (
-                out.a.as_mut_ptr().add(out.edges),
-                out.b.as_mut_ptr().add(out.edges),
-                out.end.as_mut_ptr().add(out.edges),
+                out.a.add(out.edges),
+                out.b.add(out.edges),
+                out.end.add(out.edges),
             );
             // Whole stores of the edges, with garbage past the vertex's
             // last edge, which the next vertex's edges overwrite (or which
@@ -1494,7 +1494,7 @@ unsafe fn emit_range_avx512(
             // stage_probe -- passes`). The same for the records, which
             // would need the room past them tracked, gained nothing (11.9 /
             // 11.9 ms on the dragon, 71 / 66 ms on the 5M scene).
-            if out.edges + 8 <= out.a.len() {
+            if out.edges + 8 <= out.len {
                 _mm256_storeu_si256(a.cast(), a_at);
                 _mm256_storeu_si256(b.cast(), b_at);
                 _mm256_storeu_si256(e.cast(), end_at);
@@ -1518,7 +1518,9 @@ unsafe fn emit_range_avx512(
         out.edges += edges;
     };
     let mut spilled = 0;
+    let mut kout = KernelOut::of(&mut group);
     for v in vertices {
+        let out = &mut kout;
         let (from, l) = listings.of(v);
         if l <= 8 {
             // The vertex's 8 slots in one load, whatever its number of
@@ -1535,10 +1537,7 @@ unsafe fn emit_range_avx512(
             let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555 & words;
             let records = (0x5555 & words) | (lower << 1);
             let k = records.count_ones() as usize;
-            assert!(
-                out.records + k <= out.a.len(),
-                "topology: records miscounted"
-            );
+            assert!(out.records + k <= out.len, "topology: records miscounted");
             if l <= 4 {
                 // At most 8 words: keys made in place, with the rank of
                 // each record its word's lane and the other lanes all
@@ -1560,7 +1559,7 @@ unsafe fn emit_range_avx512(
                     _mm256_or_si256(_mm256_slli_epi32::<4>(_mm512_castsi512_si256(x)), rank8),
                 );
                 let opp = _mm512_castsi512_si256(swapped);
-                finish(&mut out, sort8(keys), none8, opp, opp, k, v);
+                finish(out, sort8(keys), none8, opp, opp, k, v);
                 continue;
             }
             let kmask = ((1u32 << k) - 1) as u16;
@@ -1581,7 +1580,7 @@ unsafe fn emit_range_avx512(
             );
             let first = _mm512_castsi512_si256(keys);
             if k <= 8 {
-                finish(&mut out, sort8(first), none8, opp_lo, opp_hi, k, v);
+                finish(out, sort8(first), none8, opp_lo, opp_hi, k, v);
             } else {
                 // Two sorted halves, then a bitonic merge: the first half
                 // against the second reversed gives the 8 smallest and the
@@ -1593,22 +1592,67 @@ unsafe fn emit_range_avx512(
                     merge8(_mm256_min_epu32(a, b)),
                     merge8(_mm256_max_epu32(a, b)),
                 );
-                finish(&mut out, lo, hi, opp_lo, opp_hi, 8, v);
-                finish(&mut out, hi, none8, opp_lo, opp_hi, k - 8, v);
+                finish(out, lo, hi, opp_lo, opp_hi, 8, v);
+                finish(out, hi, none8, opp_lo, opp_hi, k - 8, v);
             }
             continue;
         }
         listings.gather(v, l, &mut spilled, buf);
+        (group.records, group.edges) = (kout.records, kout.edges);
         emit_vertex::<false>(
-            &mut out,
+            &mut group,
             v as u32,
             0,
             &buf.pairs,
             &buf.tri,
             &mut buf.records,
         );
+        // (Pointers taken again: `emit_vertex` wrote through the slices.)
+        kout = KernelOut::of(&mut group);
     }
-    (out.records, out.edges)
+    (kout.records, kout.edges)
+}
+
+/// What [`emit_range_avx512`] writes through, as raw pointers and counts in
+/// a local of its own.
+///
+/// Why: through the [`GroupOut`] it gets, whose address [`emit_vertex`]
+/// also takes, every store of a record or an edge could have changed the
+/// struct, so the kernel loaded its pointers and counts again after each
+/// vertex's stores and stored the counts back. One thread, `RECYCLE=1
+/// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe --
+/// passes FILE`, binaries alternated: the emit pass 6.71–6.77 → 6.56–6.60
+/// ms on the dragon (four), 35.28–35.36 → 34.72–34.93 ms on the 5M scene
+/// (two).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct KernelOut {
+    opp: *mut u32,
+    a: *mut MaybeUninit<u32>,
+    b: *mut MaybeUninit<u32>,
+    end: *mut MaybeUninit<u32>,
+    /// The length of `a`, `b` and `end`.
+    len: usize,
+    base: u32,
+    records: usize,
+    edges: usize,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl KernelOut {
+    fn of(out: &mut GroupOut) -> Self {
+        debug_assert!(out.a.len() == out.b.len() && out.a.len() == out.end.len());
+        KernelOut {
+            opp: out.opp,
+            a: out.a.as_mut_ptr(),
+            b: out.b.as_mut_ptr(),
+            end: out.end.as_mut_ptr(),
+            len: out.a.len(),
+            base: out.base,
+            records: out.records,
+            edges: out.edges,
+        }
+    }
 }
 
 /// Pass 1 for one chunk of triangles: per range, its listings (high 32
