@@ -1625,21 +1625,27 @@ unsafe fn emit_range_avx512(
 /// ms on the dragon (four), 35.28–35.36 → 34.72–34.93 ms on the 5M scene
 /// (two).
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
 struct KernelOut {
+    /// [`GroupOut::opp`].
     opp: *mut u32,
+    /// The starts of [`GroupOut::a`], [`GroupOut::b`] and
+    /// [`GroupOut::end`], taken again after anything else writes them.
     a: *mut MaybeUninit<u32>,
     b: *mut MaybeUninit<u32>,
     end: *mut MaybeUninit<u32>,
     /// The length of `a`, `b` and `end`.
     len: usize,
+    /// [`GroupOut::base`].
     base: u32,
+    /// [`GroupOut::records`], handed back before anything else writes.
     records: usize,
+    /// [`GroupOut::edges`], the same.
     edges: usize,
 }
 
 #[cfg(target_arch = "x86_64")]
 impl KernelOut {
+    /// The view of `out` as it stands.
     fn of(out: &mut GroupOut) -> Self {
         debug_assert!(out.a.len() == out.b.len() && out.a.len() == out.end.len());
         KernelOut {
