@@ -86,9 +86,30 @@ pub fn split(n: u32, max_mult: u32) -> (u32, u32) {
     }
 }
 
-/// Edges per parallel block of the fill pass: large enough that the per-block
-/// bookkeeping (one counter per bucket) costs nothing.
-const BLOCK: usize = 1 << 14;
+/// Edges (or caps triangles) per block of the fill pass, which is also the
+/// unit the writer fills and then copies into the file with one `pwrite`:
+/// large enough that the per-block bookkeeping (one counter per bucket)
+/// costs nothing, and that the copies take the page cache in large folios.
+///
+/// Why 32,768 and not 16,384 (until the fortieth round): a write that
+/// starts mid-page gets its folios in a ramp of sizes (1, 2, 4, ... pages,
+/// as the file offset's alignment allows) before the large ones, and every
+/// unit's write starts such a ramp again. The dragon's output took 1,298
+/// folios in 1 MiB writes, 671 in 2 MiB ones (`perf stat -e
+/// filemap:mm_filemap_add_to_page_cache` on a one-thread build), and the
+/// writes got faster: `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release
+/// --example stage_probe -- fill-write target/dragon/dragon.glb`, the
+/// writes alone 18.6–19.4 → 13.4–13.7 ms (65,536: 13.0–13.1 ms, with the
+/// caps' fills slower), the fills unchanged. Whole one-thread builds
+/// (`python3 benches/compare_binaries.py OLD NEW FILE ROUNDS`): the
+/// dragon 53.8 / 57.1 → 52.7 / 54.9 ms after parsing, fastest / median
+/// (24 rounds), the 5M scene's write stage 128.7 / 131.5 → 120.7 / 122.7
+/// ms (6 rounds). Two threads unchanged (32.6 / 33.7 against 32.5 / 33.8
+/// ms): the caps go in faster, but the last block, copied after the last
+/// edge is made, is twice as long. Units filled two to sixteen at a time
+/// and written in one call had been slower in the fifteenth round, on the
+/// earlier host and kernel (benches/ROUNDS.md).
+pub const BLOCK: usize = 1 << 15;
 
 /// Records ahead of the one being written whose corner positions are
 /// prefetched: the position table is larger than L2 and an edge's or a
@@ -207,12 +228,12 @@ impl Plan {
         self.counts.iter().sum()
     }
 
-    /// Number of side fill blocks (`BLOCK` = 16,384 edges each).
+    /// Number of side fill blocks ([`BLOCK`] edges each).
     pub fn side_blocks(&self) -> usize {
         self.block_counts.len()
     }
 
-    /// Number of caps fill blocks (`BLOCK` = 16,384 triangles each).
+    /// Number of caps fill blocks ([`BLOCK`] triangles each).
     pub fn cap_blocks(&self) -> usize {
         self.triangles.div_ceil(BLOCK)
     }

@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use svpack::build::{BuildConfig, build_file};
 use svpack::format::{self, Encoding};
+use svpack::layout::BLOCK;
 
 /// A grid with fins on every 5th cell and fans of 1–17 extra triangles on
 /// every 97th edge: several side and caps blocks, every bucket of every K.
@@ -41,6 +42,11 @@ fn fan_grid(dir: &Path) -> PathBuf {
             }
         }
     }
+    let faces = s.lines().filter(|l| l.starts_with("f ")).count();
+    assert!(
+        faces > BLOCK,
+        "more than one caps block ({faces} triangles)"
+    );
     let p = dir.join("fan_grid.obj");
     std::fs::write(&p, s).unwrap();
     p
@@ -52,9 +58,10 @@ fn fan_grid(dir: &Path) -> PathBuf {
 /// and `0` (one welded position, written `+0.0`), a copy of every 7th
 /// vertex that some triangles use instead, and degenerate triangles (a
 /// corner repeated, or a vertex and its copy) in runs at the start, at
-/// the end, just before kept triangle 16,382 (caps unit 1 starts two
-/// kept triangles after it) and just before kept triangle 32,768 (the
-/// first of unit 2).
+/// the end, just before kept triangle `BLOCK - 2` (caps unit 1 starts
+/// two kept triangles after it), just after unit 1's first (before kept
+/// triangle `BLOCK + 1`) and just before kept triangle `2 * BLOCK` (the
+/// first of unit 2), `layout::BLOCK` triangles to a unit.
 fn degenerate_grid(dir: &Path) -> PathBuf {
     let n = 190;
     let mut s = String::new();
@@ -119,7 +126,7 @@ fn degenerate_grid(dir: &Path) -> PathBuf {
                 [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
                 [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
             ] {
-                if kept == 16_384 - 2 || kept == 32_768 {
+                if kept == BLOCK - 2 || kept == BLOCK + 1 || kept == 2 * BLOCK {
                     degenerate(&mut s, 10);
                 }
                 let _ = writeln!(s, "f {} {} {}", alt(t[0], kept), t[1], alt(t[2], kept / 3));
@@ -129,6 +136,7 @@ fn degenerate_grid(dir: &Path) -> PathBuf {
     }
     degenerate(&mut s, 2);
     assert!(kept >= format::ROOM_MIN_TRIANGLES as usize);
+    assert!(kept > 2 * BLOCK, "the grid reaches caps unit 2");
     let p = dir.join("degenerate_grid.obj");
     std::fs::write(&p, s).unwrap();
     p
@@ -196,8 +204,9 @@ fn streamed_files_equal_whole_buffer_files() {
 
 /// The one-thread build of a file with header room takes its caps from
 /// the soup (`layout::SoupCaps`), the compressed one from the welded mesh.
-/// Caught: the soup's `-0.0` written as it is (no `+ 0.0`), and the
-/// dropped triangles not skipped (the caps' bytes differed both times).
+/// Caught: the soup's `-0.0` written as it is (no `+ 0.0`), the dropped
+/// triangles not skipped, and a unit counting the dropped triangles after
+/// its first kept one as before it (the caps' bytes differed each time).
 #[test]
 fn caps_from_the_soup_are_the_welded_caps() {
     let tmp = tempfile::tempdir().unwrap();
@@ -216,7 +225,7 @@ fn caps_from_the_soup_are_the_welded_caps() {
     );
     assert_eq!(
         f.header.meshes[0].stats.degenerate_triangles,
-        2 * (3 + 10 + 10 + 2)
+        2 * (3 + 10 + 10 + 10 + 2)
     );
 }
 
