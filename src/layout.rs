@@ -99,8 +99,8 @@ pub fn split(n: u32, max_mult: u32) -> (u32, u32) {
 /// filemap:mm_filemap_add_to_page_cache` on a one-thread build), and the
 /// writes got faster: `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release
 /// --example stage_probe -- fill-write target/dragon/dragon.glb`, the
-/// writes alone 18.6–19.4 → 13.4–13.7 ms (65,536: 13.0–13.1 ms, with the
-/// caps' fills slower), the fills unchanged. Whole one-thread builds
+/// writes alone 18.6–18.7 → 13.4–13.7 ms (65,536: 13.0–13.1 ms, with the
+/// caps' fills slower), the fills unchanged (two alternations). Whole one-thread builds
 /// (`python3 benches/compare_binaries.py OLD NEW FILE ROUNDS`): the
 /// dragon 53.8 / 57.1 → 52.7 / 54.9 ms after parsing, fastest / median
 /// (24 rounds), the 5M scene's write stage 128.7 / 131.5 → 120.7 / 122.7
