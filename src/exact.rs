@@ -79,6 +79,21 @@ pub(crate) fn orient3d_filtered(t: [[f64; 3]; 3], d: [f64; 3]) -> Option<i32> {
     }
 }
 
+/// Sign (−1, 0, +1) of `det[t0; t1; t2; (d, 0)]` (the sign [`det4_sign`]
+/// gives for three points with `w = 1` and a direction) when the f64
+/// evaluation decides it, `None` otherwise: [`det4_sign`]'s reduction
+/// (`−det3[t0 − t2; t1 − t2; d]`) with Shewchuk's first-stage bound
+/// ([`det3_sign_filtered`], no slack: each entry is exact or one rounded
+/// subtraction of f32 values). The entries must be f32 values.
+#[inline(always)]
+pub(crate) fn directional_filtered(t: [[f64; 3]; 3], d: [f64; 3]) -> Option<i32> {
+    let [a, b] = [t[0], t[1]].map(|p| [p[0] - t[2][0], p[1] - t[2][1], p[2] - t[2][2]]);
+    match det3_sign_filtered(a, b, d, 0.0) {
+        0 => None,
+        s => Some(-s),
+    }
+}
+
 /// Sign (−1, 0, +1) of `det[r0; r1; r2; r3]` (rows), exactly.
 ///
 /// With every `w` in {0, 1} (all the shadow check asks), row operations
@@ -532,6 +547,61 @@ mod tests {
             }
         }
         // Both outcomes occur: the coplanar cases exercise the bound.
+        assert!(
+            decided > 9_000 && undecided > 3_000,
+            "{decided} / {undecided}"
+        );
+    }
+
+    #[test]
+    fn directional_filtered_decides_only_what_the_exact_sign_says() {
+        let mut next = xorshift(0x0d1e_c710_0a11);
+        let mut unit = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
+        let (mut decided, mut undecided) = (0, 0);
+        for i in 0..20_000 {
+            // A triangle and a direction: exactly parallel to its plane (a
+            // tilted plane of small integers, or all at one z), one f32 ulp
+            // off parallel, an edge's direction rounded to f32, or
+            // anything; at several scales.
+            let scale = [1e-3, 1.0, 1e3][i % 3];
+            let q = |v: f64| (v * scale) as f32;
+            let int = |v: f64| (v * (1u32 << 21) as f64).floor() as f32;
+            let mut t: [[f32; 3]; 3] = std::array::from_fn(|_| [q(unit()), q(unit()), q(unit())]);
+            let mut l = [q(unit() - 0.5), q(unit() - 0.5), q(unit() - 0.5)];
+            match i % 6 {
+                0 | 1 => {
+                    // x + y + z = 2^23, and directions with x + y + z = 0.
+                    let on = |x: f32, y: f32| [x, y, (1u32 << 23) as f32 - x - y];
+                    t = std::array::from_fn(|_| on(int(unit()), int(unit())));
+                    let (x, y) = (int(unit()) - int(unit()), int(unit()) - int(unit()));
+                    l = [x, y, -x - y];
+                    if i % 6 == 1 {
+                        l[2] = f32::from_bits(l[2].to_bits() + 1);
+                    }
+                }
+                2 => l = [0, 1, 2].map(|a| t[1][a] - t[0][a]),
+                3 => {
+                    let z = t[0][2];
+                    for c in &mut t {
+                        c[2] = z;
+                    }
+                    l[2] = 0.0;
+                }
+                _ => {}
+            }
+            let f = t.map(|c| c.map(f64::from));
+            let lf = l.map(f64::from);
+            let w1 = |c: [f64; 3]| [c[0], c[1], c[2], 1.0];
+            let exact = det4_sign([w1(f[0]), w1(f[1]), w1(f[2]), [lf[0], lf[1], lf[2], 0.0]]);
+            match directional_filtered(f, lf) {
+                Some(s) => {
+                    assert_eq!(s, exact, "case {i}: {t:?}, {l:?}");
+                    decided += 1;
+                }
+                None => undecided += 1,
+            }
+        }
+        // Both outcomes occur: the parallel cases exercise the bound.
         assert!(
             decided > 9_000 && undecided > 3_000,
             "{decided} / {undecided}"
