@@ -350,7 +350,7 @@ struct SideCandidates {
 const EXTRUSION_SLACK: f64 = 1.0 / (1u64 << 20) as f64;
 
 impl SideCandidates {
-    fn new(sides: &[Emitted], dir: [f32; 3], samples: &[[f32; 3]]) -> SideCandidates {
+    fn new(sides: &[Emitted], light: Light, dir: [f32; 3], samples: &[[f32; 3]]) -> SideCandidates {
         let d = dir.map(|x| x as f64);
         let dh = [d[0], d[1], d[2], 0.0];
         let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
@@ -422,9 +422,10 @@ impl SideCandidates {
             .collect();
         let mut lists = vec![Vec::new(); samples.len()];
         for (i, e) in sides.iter().enumerate() {
+            let corners = e.corners(light);
             let mut blo = [f64::INFINITY; 2];
             let mut bhi = [f64::NEG_INFINITY; 2];
-            for c in &e.corners {
+            for c in &corners {
                 let q = proj([c[0], c[1], c[2]]);
                 let scale = c[0].abs().max(c[1].abs()).max(c[2].abs());
                 if c[3] == 0.0 {
@@ -453,7 +454,7 @@ impl SideCandidates {
             if (0..2).any(|k| bhi[k] < lo[k] || blo[k] > hi[k]) {
                 continue;
             }
-            let linear = EdgeFunctions::new(&e.corners, [dh[0], dh[1], dh[2]], origin);
+            let linear = EdgeFunctions::new(&corners, [dh[0], dh[1], dh[2]], origin);
             let range = |k: usize| {
                 let a = ((blo[k] - lo[k]) / cell[k]).floor().max(0.0) as usize;
                 let b = ((bhi[k] - lo[k]) / cell[k]).floor().min((grid - 1) as f64) as usize;
@@ -467,7 +468,7 @@ impl SideCandidates {
                             continue;
                         }
                         let p = &points[j as usize];
-                        if !passes_beside(p, &dh, &e.corners, EXTRUSION_SLACK) {
+                        if !passes_beside(p, &dh, &corners, EXTRUSION_SLACK) {
                             lists[j as usize].push(i as u32);
                         }
                     }
@@ -583,13 +584,53 @@ impl EdgeFunctions {
     }
 }
 
-/// A triangle the shaders emit, with its stencil weight: `corners` as
-/// emitted (corners at infinity rounded by the contract's `toInf`), `exact`
-/// the same triangle with those corners extruded exactly.
+/// A side triangle the shaders emit: which one of the side quad of edge
+/// (A, B) with multiplicity `m` (nonzero), whose stencil weight is |m|.
+/// Its corners are made where they are used ([`Emitted::corners`],
+/// [`Emitted::exact`]): kept, they were 320 bytes per triangle, 35 MB of
+/// fresh memory per light on the dragon.
 struct Emitted {
-    corners: [H; 3],
-    exact: [Point; 3],
-    weight: i32,
+    a: [f32; 3],
+    b: [f32; 3],
+    m: i32,
+    /// The quad's second triangle (draw vertices 3, 4, 5).
+    second: bool,
+}
+
+impl Emitted {
+    /// The triangle's corners as indices into (A, B, A∞, B∞).
+    fn ids(&self) -> [usize; 3] {
+        let tri = if self.second { [3, 4, 5] } else { [0, 1, 2] };
+        tri.map(|v| side_corner(v, self.m) as usize)
+    }
+
+    /// The corners as emitted (corners at infinity rounded by the
+    /// contract's `toInf`).
+    fn corners(&self, light: Light) -> [H; 3] {
+        let quad = [
+            fin(self.a),
+            fin(self.b),
+            inf(self.a, light),
+            inf(self.b, light),
+        ];
+        self.ids().map(|i| quad[i])
+    }
+
+    /// The same triangle with its corners at infinity extruded exactly.
+    fn exact(&self, light: Light) -> [Point; 3] {
+        let quad = [
+            Point::H(fin(self.a)),
+            Point::H(fin(self.b)),
+            inf_exact(self.a, light),
+            inf_exact(self.b, light),
+        ];
+        self.ids().map(|i| quad[i])
+    }
+
+    /// The stencil weight.
+    fn weight(&self) -> i32 {
+        self.m.abs()
+    }
 }
 
 /// Exact shadow truth at `p`: the number of triangles the open segment from
@@ -667,8 +708,6 @@ fn usable_exact(c: &[Point; 3]) -> bool {
 /// The side triangles the shaders draw for `light` under `ev`, each with its
 /// stencil weight, as emitted and as extruded exactly.
 fn emitted_sides(d: &Decoded, light: Light, ev: &Evaluation) -> Vec<Emitted> {
-    let inf = |p: [f32; 3]| inf(p, light);
-    let inf_exact = |p: [f32; 3]| inf_exact(p, light);
     let mut sides: Vec<Emitted> = Vec::new();
     for (b, ms) in d.buckets.iter().zip(&ev.sides) {
         // A and B as the record stores them, what the shader extrudes (in a
@@ -677,26 +716,17 @@ fn emitted_sides(d: &Decoded, light: Light, ev: &Evaluation) -> Vec<Emitted> {
             if m == 0 {
                 continue;
             }
-            let (pa, pb) = ([r[0], r[1], r[2]], [r[4], r[5], r[6]]);
-            let quad = [fin(pa), fin(pb), inf(pa), inf(pb)];
-            let quad_exact = [
-                Point::H(fin(pa)),
-                Point::H(fin(pb)),
-                inf_exact(pa),
-                inf_exact(pb),
-            ];
-            for tri in [[0, 1, 2], [3, 4, 5]] {
-                let id = tri.map(|v| side_corner(v, m as i32) as usize);
-                let corners = id.map(|i| quad[i]);
-                let exact = id.map(|i| quad_exact[i]);
+            for second in [false, true] {
+                let e = Emitted {
+                    a: [r[0], r[1], r[2]],
+                    b: [r[4], r[5], r[6]],
+                    m: m as i32,
+                    second,
+                };
                 // A light exactly on A or B extrudes it to (0,0,0,0), which is
                 // no point at all: such a triangle has no area to cross.
-                if usable(&corners) || usable_exact(&exact) {
-                    sides.push(Emitted {
-                        corners,
-                        exact,
-                        weight: m.unsigned_abs() as i32,
-                    });
+                if usable(&e.corners(light)) || usable_exact(&e.exact(light)) {
+                    sides.push(e);
                 }
             }
         }
@@ -849,9 +879,9 @@ pub fn check_shadow(
         let dh = [dk[0] as f64, dk[1] as f64, dk[2] as f64, 0.0];
         let meet_e = |a: H, e: &Emitted| {
             if exact {
-                meet_points(Point::H(a), Point::H(dh), e.exact)
+                meet_points(Point::H(a), Point::H(dh), e.exact(light))
             } else {
-                meet(a, dh, e.corners)
+                meet(a, dh, e.corners(light))
             }
         };
         let Some(back) = *back_terms[exact as usize][k]
@@ -862,11 +892,11 @@ pub fn check_shadow(
         let mut w = back;
         let mut ok = true;
         let mut on_face = false;
-        let lists = candidates[k].get_or_init(|| SideCandidates::new(&sides, dk, samples));
+        let lists = candidates[k].get_or_init(|| SideCandidates::new(&sides, light, dk, samples));
         for &i in &lists.lists[j] {
             let e = &sides[i as usize];
             match meet_e(p, e) {
-                Meet::Cross(sg) => w += sg * e.weight,
+                Meet::Cross(sg) => w += sg * e.weight(),
                 Meet::None => {}
                 Meet::AOnTriangle => on_face = true,
                 Meet::Degenerate => ok = false,
@@ -997,7 +1027,7 @@ mod tests {
                 // which differ where an extrusion rounds.
                 for e in &sides {
                     for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-                        let (p, q) = (e.exact[i], e.exact[j]);
+                        let (p, q) = (e.exact(light)[i], e.exact(light)[j]);
                         let (Point::H(p), q) = (p, q) else { continue };
                         if p[3] != 1.0 {
                             continue;
@@ -1007,10 +1037,10 @@ mod tests {
                                 vec![[q[0] - p[0], q[1] - p[1], q[2] - p[2]]]
                             }
                             Point::H(q) => vec![[q[0], q[1], q[2]]],
-                            Point::Away(a, l) => vec![
-                                [a[0] - l[0], a[1] - l[1], a[2] - l[2]],
-                                [e.corners[j][0], e.corners[j][1], e.corners[j][2]],
-                            ],
+                            Point::Away(a, l) => vec![[a[0] - l[0], a[1] - l[1], a[2] - l[2]], {
+                                let c = e.corners(light)[j];
+                                [c[0], c[1], c[2]]
+                            }],
                         };
                         for dv in dirs {
                             for t in [0.25, 0.5, 3.0, 50.0, 1000.0] {
@@ -1020,16 +1050,16 @@ mod tests {
                     }
                 }
                 for (k, &dir) in DIRECTIONS.iter().enumerate().take(2) {
-                    let lists = SideCandidates::new(&sides, dir, &samples);
+                    let lists = SideCandidates::new(&sides, light, dir, &samples);
                     let dh = [dir[0] as f64, dir[1] as f64, dir[2] as f64, 0.0];
                     for (j, &s) in samples.iter().enumerate() {
                         let p = fin(s);
                         listed += lists.lists[j].len();
                         for (i, e) in sides.iter().enumerate() {
                             pairs += 1;
-                            let rounded = meet(p, dh, e.corners) != Meet::None;
-                            let exact =
-                                meet_points(Point::H(p), Point::H(dh), e.exact) != Meet::None;
+                            let rounded = meet(p, dh, e.corners(light)) != Meet::None;
+                            let exact = meet_points(Point::H(p), Point::H(dh), e.exact(light))
+                                != Meet::None;
                             if rounded || exact {
                                 met += 1;
                                 assert!(
