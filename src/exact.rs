@@ -488,57 +488,28 @@ mod tests {
         }
     }
 
-    #[test]
-    fn orient3d_filtered_decides_only_what_the_exact_sign_says() {
-        let mut next = xorshift(0x5eed_0f0e_1e47);
+    /// Runs `filtered` on 20,000 cases from `case` (given the case number,
+    /// a source of uniform values and a scale, a triangle and the fourth
+    /// row's `x, y, z`, whose `w` is `w`): every sign it decides must be
+    /// [`det4_sign`]'s, and it must both decide and decline often (the
+    /// near-degenerate cases exercise the bound).
+    fn filter_agrees_with_exact(
+        seed: u64,
+        w: f64,
+        filtered: fn([[f64; 3]; 3], [f64; 3]) -> Option<i32>,
+        mut case: impl FnMut(usize, &mut dyn FnMut() -> f64, f64) -> ([[f32; 3]; 3], [f32; 3]),
+    ) {
+        let mut next = xorshift(seed);
         let mut unit = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
         let (mut decided, mut undecided) = (0, 0);
         for i in 0..20_000 {
-            // A triangle and a point: exactly coplanar (on a tilted plane
-            // of small integers, on a corner, or all at one z), one f32 ulp
-            // off such a plane, near the plane within f32 rounding, or
-            // anywhere; at several scales.
             let scale = [1e-3, 1.0, 1e3][i % 3];
-            let q = |v: f64| (v * scale) as f32;
-            // Integers below 2^21: the products of their differences
-            // outgrow f64's 53 bits, so the f64 determinant of coplanar
-            // points is often not exactly 0.
-            let int = |v: f64| (v * (1u32 << 21) as f64).floor() as f32;
-            let mut t: [[f32; 3]; 3] = std::array::from_fn(|_| [q(unit()), q(unit()), q(unit())]);
-            let mut l = [q(unit()), q(unit()), q(unit())];
-            match i % 6 {
-                0 | 1 => {
-                    // x + y + z = 2^23, exactly in f32.
-                    let on = |x: f32, y: f32| [x, y, (1u32 << 23) as f32 - x - y];
-                    t = std::array::from_fn(|_| on(int(unit()), int(unit())));
-                    l = on(int(unit()), int(unit()));
-                    if i % 6 == 1 {
-                        l[2] = f32::from_bits(l[2].to_bits() + 1);
-                    }
-                }
-                2 => l = t[i % 3],
-                3 => {
-                    let z = t[0][2];
-                    for c in &mut t {
-                        c[2] = z;
-                    }
-                    l[2] = z;
-                }
-                4 => {
-                    let (u, v) = (unit(), unit());
-                    l = std::array::from_fn(|a| {
-                        (t[0][a] as f64
-                            + u * (t[1][a] - t[0][a]) as f64
-                            + v * (t[2][a] - t[0][a]) as f64) as f32
-                    });
-                }
-                _ => {}
-            }
+            let (t, l) = case(i, &mut unit, scale);
             let f = t.map(|c| c.map(f64::from));
             let lf = l.map(f64::from);
             let w1 = |c: [f64; 3]| [c[0], c[1], c[2], 1.0];
-            let exact = det4_sign([w1(f[0]), w1(f[1]), w1(f[2]), w1(lf)]);
-            match orient3d_filtered(f, lf) {
+            let exact = det4_sign([w1(f[0]), w1(f[1]), w1(f[2]), [lf[0], lf[1], lf[2], w]]);
+            match filtered(f, lf) {
                 Some(s) => {
                     assert_eq!(s, exact, "case {i}: {t:?}, {l:?}");
                     decided += 1;
@@ -546,65 +517,107 @@ mod tests {
                 None => undecided += 1,
             }
         }
-        // Both outcomes occur: the coplanar cases exercise the bound.
         assert!(
             decided > 9_000 && undecided > 3_000,
             "{decided} / {undecided}"
         );
     }
 
+    /// Integers below 2^21 as f32: the products of their differences
+    /// outgrow f64's 53 bits, so the f64 determinant of coplanar points is
+    /// often not exactly 0.
+    fn int(v: f64) -> f32 {
+        (v * (1u32 << 21) as f64).floor() as f32
+    }
+
+    /// A point on the plane x + y + z = 2^23, exactly in f32.
+    fn on_plane(x: f32, y: f32) -> [f32; 3] {
+        [x, y, (1u32 << 23) as f32 - x - y]
+    }
+
+    #[test]
+    fn orient3d_filtered_decides_only_what_the_exact_sign_says() {
+        // A triangle and a point: exactly coplanar (on a tilted plane of
+        // small integers, on a corner, or all at one z), one f32 ulp off
+        // such a plane, near the plane within f32 rounding, or anywhere; at
+        // several scales.
+        filter_agrees_with_exact(
+            0x5eed_0f0e_1e47,
+            1.0,
+            orient3d_filtered,
+            |i, unit, scale| {
+                let q = |v: f64| (v * scale) as f32;
+                let mut t: [[f32; 3]; 3] =
+                    std::array::from_fn(|_| [q(unit()), q(unit()), q(unit())]);
+                let mut l = [q(unit()), q(unit()), q(unit())];
+                match i % 6 {
+                    0 | 1 => {
+                        t = std::array::from_fn(|_| on_plane(int(unit()), int(unit())));
+                        l = on_plane(int(unit()), int(unit()));
+                        if i % 6 == 1 {
+                            l[2] = f32::from_bits(l[2].to_bits() + 1);
+                        }
+                    }
+                    2 => l = t[i % 3],
+                    3 => {
+                        let z = t[0][2];
+                        for c in &mut t {
+                            c[2] = z;
+                        }
+                        l[2] = z;
+                    }
+                    4 => {
+                        let (u, v) = (unit(), unit());
+                        l = std::array::from_fn(|a| {
+                            (t[0][a] as f64
+                                + u * (t[1][a] - t[0][a]) as f64
+                                + v * (t[2][a] - t[0][a]) as f64) as f32
+                        });
+                    }
+                    _ => {}
+                }
+                (t, l)
+            },
+        );
+    }
+
     #[test]
     fn directional_filtered_decides_only_what_the_exact_sign_says() {
-        let mut next = xorshift(0x0d1e_c710_0a11);
-        let mut unit = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
-        let (mut decided, mut undecided) = (0, 0);
-        for i in 0..20_000 {
-            // A triangle and a direction: exactly parallel to its plane (a
-            // tilted plane of small integers, or all at one z), one f32 ulp
-            // off parallel, an edge's direction rounded to f32, or
-            // anything; at several scales.
-            let scale = [1e-3, 1.0, 1e3][i % 3];
-            let q = |v: f64| (v * scale) as f32;
-            let int = |v: f64| (v * (1u32 << 21) as f64).floor() as f32;
-            let mut t: [[f32; 3]; 3] = std::array::from_fn(|_| [q(unit()), q(unit()), q(unit())]);
-            let mut l = [q(unit() - 0.5), q(unit() - 0.5), q(unit() - 0.5)];
-            match i % 6 {
-                0 | 1 => {
-                    // x + y + z = 2^23, and directions with x + y + z = 0.
-                    let on = |x: f32, y: f32| [x, y, (1u32 << 23) as f32 - x - y];
-                    t = std::array::from_fn(|_| on(int(unit()), int(unit())));
-                    let (x, y) = (int(unit()) - int(unit()), int(unit()) - int(unit()));
-                    l = [x, y, -x - y];
-                    if i % 6 == 1 {
-                        l[2] = f32::from_bits(l[2].to_bits() + 1);
+        // A triangle and a direction: exactly parallel to its plane (a
+        // tilted plane of small integers, or all at one z), one f32 ulp off
+        // parallel, an edge's direction rounded to f32, or anything; at
+        // several scales.
+        filter_agrees_with_exact(
+            0x0d1e_c710_0a11,
+            0.0,
+            directional_filtered,
+            |i, unit, scale| {
+                let q = |v: f64| (v * scale) as f32;
+                let mut t: [[f32; 3]; 3] =
+                    std::array::from_fn(|_| [q(unit()), q(unit()), q(unit())]);
+                let mut l = [q(unit() - 0.5), q(unit() - 0.5), q(unit() - 0.5)];
+                match i % 6 {
+                    0 | 1 => {
+                        // Directions with x + y + z = 0.
+                        t = std::array::from_fn(|_| on_plane(int(unit()), int(unit())));
+                        let (x, y) = (int(unit()) - int(unit()), int(unit()) - int(unit()));
+                        l = [x, y, -x - y];
+                        if i % 6 == 1 {
+                            l[2] = f32::from_bits(l[2].to_bits() + 1);
+                        }
                     }
-                }
-                2 => l = [0, 1, 2].map(|a| t[1][a] - t[0][a]),
-                3 => {
-                    let z = t[0][2];
-                    for c in &mut t {
-                        c[2] = z;
+                    2 => l = [0, 1, 2].map(|a| t[1][a] - t[0][a]),
+                    3 => {
+                        let z = t[0][2];
+                        for c in &mut t {
+                            c[2] = z;
+                        }
+                        l[2] = 0.0;
                     }
-                    l[2] = 0.0;
+                    _ => {}
                 }
-                _ => {}
-            }
-            let f = t.map(|c| c.map(f64::from));
-            let lf = l.map(f64::from);
-            let w1 = |c: [f64; 3]| [c[0], c[1], c[2], 1.0];
-            let exact = det4_sign([w1(f[0]), w1(f[1]), w1(f[2]), [lf[0], lf[1], lf[2], 0.0]]);
-            match directional_filtered(f, lf) {
-                Some(s) => {
-                    assert_eq!(s, exact, "case {i}: {t:?}, {l:?}");
-                    decided += 1;
-                }
-                None => undecided += 1,
-            }
-        }
-        // Both outcomes occur: the parallel cases exercise the bound.
-        assert!(
-            decided > 9_000 && undecided > 3_000,
-            "{decided} / {undecided}"
+                (t, l)
+            },
         );
     }
 

@@ -215,11 +215,12 @@ impl ShadowIndex {
     /// Indexes the caps triangles of a decoded mesh: sorted by the Morton
     /// code of their corner sums (21 bits per axis over the sums' bounds;
     /// ties by id, so the order is fully determined), then a hierarchy over
-    /// that order ([`Bvh::new`]). Why not the median along each node's
+    /// that order (`Bvh::new`). Why not the median along each node's
     /// widest axis, as before: a selection per node cost about three
     /// comparisons per triangle per level, and with the triangles read
-    /// through ids it took 260 ms on the 871k-triangle dragon, against
-    /// about 100 for this.
+    /// through ids it took 308–346 ms on the 871k-triangle dragon, against
+    /// 159–164 ms for this (one thread, local timers; benches/ROUNDS.md,
+    /// Forty-first round).
     pub fn new(d: &Decoded) -> ShadowIndex {
         let sum = |t: &[u32; 3]| {
             [0, 1, 2].map(|k| {

@@ -831,8 +831,9 @@ impl ClosednessIndex {
     /// their smaller id, then each smaller id's few entries (about nine on
     /// a closed mesh) sorted by the larger one, so that pairs are numbered
     /// in ascending `(smaller, larger)` order. Why not one sort of every
-    /// pair's key, as before: the dragon's 3.9M pairs took 240 ms to sort
-    /// on one thread (`verify` of its output, 2.4 s in all).
+    /// pair's key, as before: the dragon's 3.9M pairs took 240–259 ms to
+    /// number that way on one thread, against 88–100 ms for this (local
+    /// timers; benches/ROUNDS.md, Forty-first round).
     pub fn new(d: &Decoded) -> ClosednessIndex {
         let unknown_cap = d.caps.iter().flatten().any(|&i| i == UNKNOWN);
         let unknown_record = d.buckets.iter().any(|b| {
