@@ -200,6 +200,17 @@ impl OrderedEvaluation {
         &self.caps
     }
 
+    /// Per evaluation number: the triangle's number in input order.
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
+
+    /// Per triangle in input order: its evaluation number (the inverse of
+    /// [`OrderedEvaluation::order`]).
+    pub fn rank(&self) -> &[u32] {
+        &self.rank
+    }
+
     /// Number of triangles.
     pub fn len(&self) -> usize {
         self.order.len()

@@ -690,17 +690,16 @@ pub struct ClosednessScratch {
     /// Per emitted edge, grouped by its smaller vertex id: the larger id in
     /// the high half, the signed weight in the low half.
     edges: Vec<u64>,
-    /// [`check_closedness_indexed`]: per pair, the signed weight drawn.
-    pair_sum: Vec<i32>,
-    /// [`check_closedness_indexed`]: per position, the signed weight of the
-    /// edges to its own point at infinity.
-    own_sum: Vec<i32>,
-    /// [`check_closedness_indexed`]: per pair, the signed weight drawn at
-    /// infinity (when some positions share a point there).
-    inf_sum: Vec<i32>,
-    /// [`check_closedness_indexed`]: edges at infinity joining other
-    /// positions' points, keyed by those positions.
-    moved: Vec<(u64, i32)>,
+    /// [`check_closedness_indexed`]: each cap's sign, then each record's
+    /// multiplicity, as [`ClosednessIndex`] entries index them.
+    signs: Vec<i8>,
+    /// [`check_closedness_indexed`]: the two positions of each unbalanced
+    /// pair, with its weight taken away from each.
+    own: Vec<(u32, i64)>,
+    /// [`check_closedness_indexed`]: when some positions share a point at
+    /// infinity, the unbalanced pairs' weights there, keyed by the pair of
+    /// positions whose points they join.
+    at_inf: Vec<(u64, i64)>,
     /// [`infinity_ids`]: one run of positions' extruded (y, z).
     runs: Vec<([u32; 2], u32)>,
     /// [`infinity_ids`]: per position, the smallest one sharing its point
@@ -801,18 +800,28 @@ pub fn check_closedness_with(
 /// cap's edge, a side quad's A∞–B∞), or a position and its own point at
 /// infinity (a side quad's A–A∞ and B–B∞; the quad's diagonal is drawn once
 /// each way and cancels). The first two kinds join the same pairs: a cap's
-/// three corner pairs, a record's (A, B). Numbering those pairs once lets a
-/// light add each drawn edge's signed weight straight into its pair's slot,
-/// with no grouping per light.
+/// three corner pairs, a record's (A, B). The index lists, pair after pair,
+/// which caps and records draw an edge of it and in which direction, so a
+/// light sums each pair's signed weight by reading its signs in that list's
+/// order: a stream, where adding each edge's weight into its pair's slot
+/// (what this did until the forty-second round) stored into a table of
+/// megabytes at random.
 #[derive(Debug, Default)]
 pub struct ClosednessIndex {
-    /// Per cap triangle and edge e (corner e to corner e + 1): the pair's
-    /// number, with [`REVERSED`] set when corner e has the larger id;
-    /// [`COLLAPSED`] when the two corners are one position.
-    cap_pairs: Vec<[u32; 3]>,
-    /// Per record, bucket after bucket: the number of the pair (A, B), with
-    /// [`REVERSED`] set when A has the larger id, or [`COLLAPSED`].
-    record_pairs: Vec<u32>,
+    /// Per pair, in ascending `(smaller, larger)` order of its ids: one
+    /// entry per cap edge or record on it. An entry's low 30 bits index the
+    /// light's signs: a cap by its evaluation number
+    /// ([`OrderedEvaluation::rank`]), the order the side records first name
+    /// the caps, which follows the pairs' order, so the signs one pair
+    /// reads lie near the last pair's (in input order they were anywhere in
+    /// the dragon's 871 KB of signs: 5.3–5.9 against 7.1–7.6 ms a light
+    /// for the sums, for 1.1 ms more putting the signs in that order, local
+    /// timers); record `r`, counting over the buckets, by
+    /// `caps + r`. [`NEGATE`] is set when the edge's weight from the
+    /// smaller id to the larger is minus that sign, and [`LAST`] marks a
+    /// pair's last entry. Collapsed edges (both ends one position) have
+    /// none.
+    pair_entries: Vec<u32>,
     /// Each pair's ids as `(smaller << 32) | larger`, ascending: pair `n`'s
     /// key is `pair_keys[n]`.
     pair_keys: Vec<u64>,
@@ -821,19 +830,21 @@ pub struct ClosednessIndex {
     usable: bool,
 }
 
-/// Flag of a [`ClosednessIndex`] pair number: the edge runs from the larger id.
-const REVERSED: u32 = 1 << 31;
-/// A [`ClosednessIndex`] edge whose ends are one position.
-const COLLAPSED: u32 = u32::MAX;
+/// Flag of a [`ClosednessIndex`] entry: its weight is minus its sign.
+const NEGATE: u32 = 1 << 31;
+/// Flag of a [`ClosednessIndex`] entry: the last of its pair.
+const LAST: u32 = 1 << 30;
+/// The sign index of a [`ClosednessIndex`] entry.
+const SIGN_INDEX: u32 = LAST - 1;
 
 impl ClosednessIndex {
-    /// Numbers the pairs of `d`: a counting sort of the drawn pairs by
-    /// their smaller id, then each smaller id's few entries (about nine on
-    /// a closed mesh) sorted by the larger one, so that pairs are numbered
-    /// in ascending `(smaller, larger)` order. Why not one sort of every
-    /// pair's key, as before: the dragon's 3.9M pairs took 240–259 ms to
-    /// number that way on one thread, against 88–100 ms for this (local
-    /// timers; benches/ROUNDS.md, Forty-first round).
+    /// Lists the pairs of `d`: a counting sort of the drawn pairs by their
+    /// smaller id, then each smaller id's few entries (about nine on a
+    /// closed mesh) sorted by the larger one, so that pairs come in
+    /// ascending `(smaller, larger)` order. Why not one sort of every pair's key, as
+    /// before: the dragon's 3.9M pairs took 240–259 ms to number that way
+    /// on one thread, against 88–100 ms for this (local timers;
+    /// benches/ROUNDS.md, Forty-first round).
     pub fn new(d: &Decoded) -> ClosednessIndex {
         let unknown_cap = d.caps.iter().flatten().any(|&i| i == UNKNOWN);
         let unknown_record = d.buckets.iter().any(|b| {
@@ -844,19 +855,15 @@ impl ClosednessIndex {
         if unknown_cap || unknown_record || d.ordered.is_none() {
             return ClosednessIndex::default();
         }
-        // Occurrences: the caps' edges first (3 per triangle), then the
-        // records, each with REVERSED set when the edge runs from the
-        // larger id.
-        let cap_edges = 3 * d.caps.len();
         let records: usize = d.buckets.iter().map(|b| b.records()).sum();
         assert!(
-            cap_edges + records < REVERSED as usize,
-            "verify: 2^31 drawn pairs or more"
+            d.caps.len() + records <= SIGN_INDEX as usize,
+            "verify: 2^30 caps and records or more"
         );
         // Per smaller id, first the count of its entries, then (after the
         // prefix sums) the end of its range, which the scatter walks back
         // to the range's start. Collapsed edges (one position) are left
-        // out: they stay COLLAPSED.
+        // out.
         let mut start = vec![0u32; d.positions.len() + 1];
         for_each_drawn_pair(d, |x, y, _| {
             if x != y {
@@ -868,61 +875,75 @@ impl ClosednessIndex {
             sum += *s;
             *s = sum;
         }
-        // Each entry: the larger id above, the occurrence below.
-        let mut entries = vec![0u64; sum as usize];
+        // Each entry: the larger id above, the entry of `pair_entries`
+        // below. A cap's sign is its edges' weight along its winding, a
+        // record's m is minus its A → B weight (`side_corner`).
+        let caps = d.caps.len() as u32;
+        let rank = d.ordered.as_ref().expect("usable").rank();
+        let mut entries = vec![0u64; start[d.positions.len()] as usize];
         for_each_drawn_pair(d, |x, y, o| {
             if x != y {
                 let at = &mut start[x.min(y) as usize];
                 *at -= 1;
-                let flag = if x > y { REVERSED } else { 0 };
-                entries[*at as usize] = ((x.max(y) as u64) << 32) | (o | flag) as u64;
+                let negate = if (x > y) != (o >= caps) { NEGATE } else { 0 };
+                let o = if o < caps { rank[o as usize] } else { o };
+                entries[*at as usize] = ((x.max(y) as u64) << 32) | (o | negate) as u64;
             }
         });
-        let mut cap_pairs = vec![[COLLAPSED; 3]; d.caps.len()];
-        let mut record_pairs = vec![COLLAPSED; records];
+        let mut pair_entries = Vec::with_capacity(entries.len());
         let mut pair_keys = Vec::new();
         for (smaller, range) in start.windows(2).enumerate() {
             let list = &mut entries[range[0] as usize..range[1] as usize];
             list.sort_unstable();
             for run in list.chunk_by(|a, b| a >> 32 == b >> 32) {
-                let n = pair_keys.len() as u32;
                 pair_keys.push(((smaller as u64) << 32) | run[0] >> 32);
-                for &e in run {
-                    let o = e as u32;
-                    let (at, flag) = ((o & !REVERSED) as usize, o & REVERSED);
-                    if at < cap_edges {
-                        cap_pairs[at / 3][at % 3] = n | flag;
-                    } else {
-                        record_pairs[at - cap_edges] = n | flag;
-                    }
-                }
+                pair_entries.extend(run.iter().map(|&e| e as u32));
+                *pair_entries.last_mut().expect("a run has entries") |= LAST;
             }
         }
         ClosednessIndex {
-            cap_pairs,
-            record_pairs,
+            pair_entries,
             pair_keys,
             usable: true,
         }
     }
 }
 
-/// Calls `f(x, y, occurrence)` for every pair a light may draw: each caps
-/// triangle's edges (corner e to corner e + 1, occurrence 3 · triangle +
-/// e), then each record's (A, B), numbered on from there.
+/// Calls `f(x, y, sign index)` for every pair a light may draw: each caps
+/// triangle `t`'s edges (corner e to corner e + 1, sign index `t`), then
+/// each record's (A, B), its sign index counting on from the caps'.
 #[inline(always)]
 fn for_each_drawn_pair(d: &Decoded, mut f: impl FnMut(u32, u32, u32)) {
     let mut o = 0u32;
     for c in &d.caps {
         f(c[0], c[1], o);
-        f(c[1], c[2], o + 1);
-        f(c[2], c[0], o + 2);
-        o += 3;
+        f(c[1], c[2], o);
+        f(c[2], c[0], o);
+        o += 1;
     }
     for b in &d.buckets {
         for ids in b.ids.chunks_exact(2 + b.k) {
             f(ids[0], ids[1], o);
             o += 1;
+        }
+    }
+}
+
+/// Walks the entries of [`ClosednessIndex::pair_entries`] and calls `f`
+/// with each pair's number and signed weight, in order: the sum of the
+/// signs its entries index, negated where they say so. Integer sums, so
+/// the order of the additions does not matter.
+#[inline(always)]
+fn pair_sums(entries: &[u32], signs: &[i8], mut f: impl FnMut(usize, i64)) {
+    let (mut n, mut sum) = (0, 0i64);
+    for &e in entries {
+        let v = signs[(e & SIGN_INDEX) as usize] as i64;
+        // 0 or −1: (v ^ −1) − (−1) = −v.
+        let negate = -((e >> 31) as i64);
+        sum += (v ^ negate) - negate;
+        if e & LAST != 0 {
+            f(n, sum);
+            (n, sum) = (n + 1, 0);
         }
     }
 }
@@ -944,9 +965,13 @@ enum InfinityIds {
 /// light extrudes every position to `−L` (`0·P − L`, the zeros canonical).
 /// For a point light the positions' x are increasing and `toInf` rounds
 /// `x − l_x`, monotone in x, so equal points lie within one run of equal
-/// extruded x; only runs longer than one are searched for a repeated
-/// (y, z). (Shared points are common: a point light half a unit from the
-/// 871k-triangle dragon merges near-coincident scan vertices.)
+/// extruded x. Within a run the extruded (y, z) usually still increase, as
+/// the positions' do; only a run where they do not is sorted and searched
+/// for a repeated (y, z). (Shared points are common: a point light half a
+/// unit from the 871k-triangle dragon merges near-coincident scan
+/// vertices.) One pass computes each position's point once: sorting every
+/// run with more than one position, as until the forty-second round, took
+/// 4–5 ms of the dragon's 14 ms check under a light merging none.
 fn infinity_ids(
     d: &Decoded,
     light: Light,
@@ -960,20 +985,26 @@ fn infinity_ids(
             InfinityIds::One
         };
     }
-    let canon = |v: f32| if v == 0.0 { 0 } else { v.to_bits() };
+    // Increasing with the value; −0.0 and +0.0 one key (`+ 0.0` makes −0.0
+    // +0.0), so equal keys are equal points.
+    let key = |p: [f32; 3]| to_infinity(p, light).map(|v| order_key(v + 0.0));
     let mut kind = InfinityIds::Distinct;
-    let (mut i, n) = (0, d.positions.len());
-    while i < n {
-        let x = canon(to_infinity(d.positions[i], light)[0]);
-        let mut j = i + 1;
-        while j < n && canon(to_infinity(d.positions[j], light)[0]) == x {
-            j += 1;
+    let n = d.positions.len();
+    let (mut from, mut sorted) = (0, true);
+    let mut last = [0; 4];
+    for i in 0..=n {
+        let q = if i < n { key(d.positions[i]) } else { [0; 4] };
+        if i < n && i > from && q[0] == last[0] {
+            sorted &= (q[1], q[2]) > (last[1], last[2]);
+            last = q;
+            continue;
         }
-        if j - i > 1 {
+        // The run from..i has ended.
+        if !sorted {
             run.clear();
-            run.extend((i..j).map(|p| {
-                let q = to_infinity(d.positions[p], light);
-                ([canon(q[1]), canon(q[2])], p as u32)
+            run.extend((from..i).map(|p| {
+                let q = key(d.positions[p]);
+                ([q[1], q[2]], p as u32)
             }));
             run.sort_unstable();
             for group in run.chunk_by(|a, b| a.0 == b.0).filter(|g| g.len() > 1) {
@@ -987,16 +1018,16 @@ fn infinity_ids(
                 }
             }
         }
-        i = j;
+        (from, sorted, last) = (i, true, q);
     }
     kind
 }
 
-/// [`check_closedness_with`], the same counts, with the pairs numbered once
-/// per file ([`ClosednessIndex`]): each drawn edge adds its signed weight to
-/// its pair's slot, and the unbalanced edges are the nonzero slots, with no
-/// grouping of edges per light. A damaged file (unknown ids, positions not
-/// strictly increasing) goes to the general check.
+/// [`check_closedness_with`], the same counts, with the pairs listed once
+/// per file ([`ClosednessIndex`]): each pair's weight is the sum of its
+/// entries' signs, read in order, with no grouping of edges per light. A
+/// damaged file (unknown ids, positions not strictly increasing) goes to
+/// the general check.
 ///
 /// At infinity the pairs are those of the positions' points, which a light
 /// may merge (`infinity_ids`). When every position has its own point, the
@@ -1005,11 +1036,18 @@ fn infinity_ids(
 /// cap reversed at infinity; a side quad runs B → A and A∞ → B∞ for m > 0,
 /// the reverse for m < 0), so the pairs at infinity are unbalanced exactly
 /// where the finite ones are. When all share one point (a directional
-/// light), every edge there is collapsed. Otherwise the pairs at infinity
-/// are summed on their own, and the few edges whose ends merged into
-/// another position's point are grouped by sorting. The edges A–A∞ (weight
-/// m) and B–B∞ (−m) are per position. With it, a light without samples
-/// took 52 ms on the dragon instead of about 164.
+/// light), every edge there is collapsed. Otherwise each unbalanced pair's
+/// weight moves to the pair of its positions' points (the pair itself when
+/// both keep their own), and those few are grouped by sorting.
+///
+/// The edges from a position P to its own point at infinity (a side
+/// quad's A–A∞ with weight m, B–B∞ with −m) weigh, in all, minus the sum of
+/// P's pairs' weights taken away from P: each cap passes through P as often
+/// as it leaves it, so its edges there cancel, and a record's A → B edge
+/// (weight −m) leaves A and enters B. So those weights are summed from the
+/// unbalanced pairs alone, none in a closed volume, instead of from every
+/// record's two ends (2.6M on the dragon: 3.5 ms of a light's 13, local
+/// timers, benches/ROUNDS.md, Forty-second round).
 pub fn check_closedness_indexed(
     d: &Decoded,
     index: &ClosednessIndex,
@@ -1021,102 +1059,69 @@ pub fn check_closedness_indexed(
         return check_closedness_with(d, light, ev, scratch);
     }
     let ClosednessScratch {
-        pair_sum: pair,
-        inf_sum,
-        own_sum: own,
+        signs,
         runs,
         rep: reps,
-        moved,
+        at_inf,
+        own,
         ..
     } = scratch;
     let kind = infinity_ids(d, light, runs, reps);
-    let merged = kind == InfinityIds::Merged;
     let mut rep = Closedness::default();
-    pair.clear();
-    pair.resize(index.pair_keys.len(), 0);
-    own.clear();
-    own.resize(d.positions.len(), 0);
-    // Pairs at infinity, only when some positions share a point there
-    // (otherwise they mirror the finite pairs); edges whose ends moved to
-    // another position's point go to `moved`.
-    inf_sum.clear();
-    moved.clear();
-    if merged {
-        inf_sum.resize(index.pair_keys.len(), 0);
-    }
-    let signed = |p: u32, w: i32| if p & REVERSED != 0 { -w } else { w };
-    // The edge x → y at infinity (weight w), the pair p of x and y.
-    let mut at_inf = |x: u32, y: u32, p: u32, w: i32| {
-        let (rx, ry) = (reps[x as usize], reps[y as usize]);
-        if rx == x && ry == y {
-            if p != COLLAPSED {
-                inf_sum[(p & !REVERSED) as usize] += signed(p, w);
-            }
-        } else if rx != ry {
-            let key = ((rx.min(ry) as u64) << 32) | rx.max(ry) as u64;
-            moved.push((key, if rx < ry { w } else { -w }));
-        }
-    };
-    for ((edges, t), &c) in index.cap_pairs.iter().zip(&d.caps).zip(&ev.caps) {
-        if c == 0 {
-            continue;
-        }
-        rep.caps += 1;
-        // The front cap runs corner 0 → 1 → 2 for c > 0, the reverse for
-        // c < 0 (`cap_corner`); the back cap runs the other way at infinity.
-        let s = c.signum() as i32;
-        for (e, &p) in edges.iter().enumerate() {
-            if p != COLLAPSED {
-                pair[(p & !REVERSED) as usize] += signed(p, s);
-            }
-            if merged {
-                at_inf(t[e], t[(e + 1) % 3], p, -s);
-            }
-        }
-    }
-    let mut r = 0;
-    for (b, ms) in d.buckets.iter().zip(&ev.sides) {
-        for (ids, &m) in b.ids.chunks_exact(2 + b.k).zip(ms) {
-            let p = index.record_pairs[r];
-            r += 1;
-            if m == 0 {
-                continue;
-            }
-            rep.silhouette_instances += 1;
+    // The signs the entries index: each cap's in evaluation order, then
+    // each record's m.
+    signs.clear();
+    let order = d.ordered.as_ref().expect("usable").order();
+    signs.extend(order.iter().map(|&t| ev.caps[t as usize].signum()));
+    rep.caps = ev.caps.iter().filter(|&&c| c != 0).count() as u64;
+    for ms in &ev.sides {
+        signs.extend_from_slice(ms);
+        for &m in ms {
+            rep.silhouette_instances += (m != 0) as u64;
             rep.side_quads += m.unsigned_abs() as u64;
-            let m = m as i32;
-            // A → B with weight −m (B → A for m > 0, `side_corner`), and
-            // A∞ → B∞ with weight m.
-            if p != COLLAPSED {
-                pair[(p & !REVERSED) as usize] += signed(p, -m);
-            }
-            if merged {
-                at_inf(ids[0], ids[1], p, m);
-            }
-            own[ids[0] as usize] += m;
-            own[ids[1] as usize] -= m;
         }
     }
-    let nonzero = |v: &[i32]| v.iter().filter(|&&w| w != 0).count() as u64;
-    let at_infinity = match kind {
-        InfinityIds::Distinct => nonzero(pair),
-        InfinityIds::One => 0,
-        InfinityIds::Merged => {
-            // Moved edges join their new pair, or a pair no finite edge has.
-            moved.sort_unstable();
-            let mut new_pairs = 0;
-            for group in moved.chunk_by(|a, b| a.0 == b.0) {
-                let w: i32 = group.iter().map(|e| e.1).sum();
-                match index.pair_keys.binary_search(&group[0].0) {
-                    Ok(n) => inf_sum[n] += w,
-                    Err(_) => new_pairs += (w != 0) as u64,
-                }
-            }
-            nonzero(inf_sum) + new_pairs
+    own.clear();
+    at_inf.clear();
+    let merged = kind == InfinityIds::Merged;
+    let mut finite = 0;
+    pair_sums(&index.pair_entries, signs, |n, s| {
+        if s == 0 {
+            return;
         }
+        finite += 1;
+        let key = index.pair_keys[n];
+        let (x, y) = ((key >> 32) as u32, key as u32);
+        own.push((x, -s));
+        own.push((y, s));
+        if merged {
+            // At infinity the pair weighs −s (its edges there run the
+            // other way), on the pair of its positions' points: its own
+            // when both keep theirs, another pair, or none when they
+            // share one.
+            let (rx, ry) = (reps[x as usize], reps[y as usize]);
+            if rx != ry {
+                let key = ((rx.min(ry) as u64) << 32) | rx.max(ry) as u64;
+                at_inf.push((key, if rx < ry { -s } else { s }));
+            }
+        }
+    });
+    let at_infinity = match kind {
+        InfinityIds::Distinct => finite,
+        InfinityIds::One => 0,
+        InfinityIds::Merged => nonzero_sums(at_inf),
     };
-    rep.violations = nonzero(pair) + at_infinity + nonzero(own);
+    rep.violations = finite + at_infinity + nonzero_sums(own);
     rep
+}
+
+/// Sorts `(key, weight)` entries and counts the keys whose weights do not
+/// sum to zero.
+fn nonzero_sums<K: Ord + Copy>(v: &mut [(K, i64)]) -> u64 {
+    v.sort_unstable();
+    v.chunk_by(|a, b| a.0 == b.0)
+        .filter(|g| g.iter().map(|e| e.1).sum::<i64>() != 0)
+        .count() as u64
 }
 
 /// Walks every triangle the shaders draw for `ev` and calls

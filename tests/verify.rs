@@ -465,6 +465,89 @@ fn closedness_counts_what_sorting_every_edge_counts() {
     );
 }
 
+/// Points at infinity are compared as values: under a light far along y,
+/// an octahedron's corners (-0, -1, 0) and (0, 1, 0) extrude to
+/// (-0, -1e9, 0) and (+0, -1e9, 0), one point, so the edges at infinity
+/// between them collapse and the others join. The indexed check merges
+/// them as the general one does, under every sign flip (signs flipped
+/// one by one and in pairs unbalance the pairs the merge touches).
+#[test]
+fn closedness_merges_signed_zeros_at_infinity() {
+    use svpack::verify::{ClosednessIndex, ClosednessScratch, check_closedness_indexed};
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("octahedron.obj");
+    let v = [
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [-0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let f = [
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    std::fs::write(&src, svpack::hardcases::obj(&v, &f)).unwrap();
+    let out = tmp.path().join("octahedron.svpk");
+    svpack::build::build_file(&src, &out, &Default::default()).unwrap();
+    // The build writes +0.0: the corner (0, -1, 0) becomes (-0, -1, 0) in
+    // every record that names it, caps and sides. The positions still
+    // increase strictly as values (that corner has the smallest y of those
+    // with x = 0), so the indexed check runs.
+    patch_payload(&out, |p, h| {
+        let m = &h.meshes[0];
+        let sections = std::iter::once((m.caps.offset, m.caps.length))
+            .chain(m.buckets.iter().map(|b| (b.offset, b.length)));
+        for (offset, length) in sections {
+            let at = (offset - h.payload_offset) as usize;
+            for row in p[at..at + length as usize].chunks_exact_mut(16) {
+                if row[..12] == [0.0f32, -1.0, 0.0].map(f32::to_le_bytes).concat()[..] {
+                    row[..4].copy_from_slice(&(-0.0f32).to_le_bytes());
+                }
+            }
+        }
+    });
+    let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+    assert!(d.positions.iter().any(|p| p[0].to_bits() == 0x8000_0000));
+    assert!(d.ordered.is_some());
+    let light = [0.0, 1e9, 0.0, 1.0];
+    let inf = |p: [f32; 3]| svpack::multiplicity::to_infinity(p, light);
+    let (minus, plus) = (inf([-0.0, -1.0, 0.0]), inf([0.0, 1.0, 0.0]));
+    assert!(minus == plus && minus[0].to_bits() != plus[0].to_bits());
+    let index = ClosednessIndex::new(&d);
+    let mut scratch = ClosednessScratch::default();
+    let ev = evaluate(&d, light, Strategy::Reference);
+    let signs = ev.caps.len() + ev.sides.iter().map(Vec::len).sum::<usize>();
+    // Sign `at` (the caps', then the records') negated, or 0 made 1.
+    let flip = |ev: &mut svpack::verify::Evaluation, at: usize| {
+        let c = match at.checked_sub(ev.caps.len()) {
+            None => &mut ev.caps[at],
+            Some(r) => ev.sides.iter_mut().flatten().nth(r).unwrap(),
+        };
+        *c = if *c == 0 { 1 } else { -*c };
+    };
+    let mut unbalanced = 0;
+    for (i, j) in (0..signs).flat_map(|i| (i..signs).map(move |j| (i, j))) {
+        let mut flipped = ev.clone();
+        flip(&mut flipped, i);
+        if j != i {
+            flip(&mut flipped, j);
+        }
+        let want = closedness_by_sorting(&d, light, &flipped);
+        let got = check_closedness_indexed(&d, &index, light, &flipped, &mut scratch);
+        assert_eq!(got, want, "signs {i} and {j} flipped");
+        unbalanced += want.violations;
+    }
+    assert!(unbalanced > 0);
+}
+
 /// A damaged file whose side records name triangles the caps do not have:
 /// the ordered evaluation (`evaluate_ordered`) leaves those records' blocks
 /// to the input-order loop, and the whole evaluation still equals
