@@ -304,6 +304,16 @@ fn sort_words<const INTO: bool>(a: &mut [u128], scratch: &mut [u128], counts: &m
     }
 }
 
+/// Sorts `words` by their high 96 bits with [`sort_words`]: positions as
+/// the order keys of their coordinates ([`order_key`], x highest) above a
+/// number, as the weld sorts its vertices; words with equal keys end up in
+/// any order. One thread. For `verify`'s decode, which puts a file's
+/// distinct positions in this order (`verify::decode`).
+pub(crate) fn sort_position_words(words: &mut [u128]) {
+    let mut scratch = vec![0u128; words.len()];
+    sort_words::<false>(words, &mut scratch, &mut Vec::new());
+}
+
 /// Part of [`sort_words`] (same `INTO`): all words of `a` agree on the
 /// key components before the one at bit `SHIFT`, whose values span
 /// `base..=base + range` (`range > 0`).
