@@ -170,6 +170,19 @@ impl IndexedCaps {
         self.sorted.is_empty()
     }
 
+    /// Triangle `t`'s corners in the contract's sorted order, and whether
+    /// that order is an odd permutation of its stored one (then its
+    /// orientation is the opposite of theirs). The points are in order of
+    /// first use, so consecutive triangles read nearby rows.
+    #[inline(always)]
+    pub fn sorted_corners(&self, t: usize) -> ([&[f32; 3]; 3], bool) {
+        let corner = |c: u32| {
+            let r = c as usize;
+            <&[f32; 3]>::try_from(&self.points[r..r + 3]).expect("three floats")
+        };
+        (self.sorted[t].map(corner), self.odd[t])
+    }
+
     /// Reference orientation of every triangle for light `l`: `out[t]` is
     /// `tri_sign` of triangle `t`'s corners in their stored order, bit for
     /// bit what [`crate::evaluate_simd::cap_signs`] computes from the

@@ -1369,10 +1369,34 @@ pub struct LightReport {
 /// [`crate::exact::det4_sign`]. Why: calling the exact predicate for each
 /// of the dragon's 871k triangles and 16 lights was 13% of `verify`'s
 /// profile samples.
+///
+/// The triangles are taken in the evaluation's order with their corners
+/// sorted ([`OrderedEvaluation`]'s caps), whose position rows follow that
+/// order, rather than in input order, where each corner is a read anywhere
+/// in the position table (larger than L2); an odd sort flips the exact
+/// sign. The dragon, one thread, 16 lights: 115–124 → 88–109 ms (local
+/// timers, benches/ROUNDS.md, Forty-second round).
 pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
-    let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
     let l = light.map(|v| v as f64);
-    let point = light[3] == 1.0;
+    if let Some(o) = &d.ordered {
+        let caps = o.caps();
+        let order = o.order();
+        return order
+            .iter()
+            .enumerate()
+            .filter(|&(r, &t)| {
+                // The sign of the triangle 32 on: input order is far
+                // from this order.
+                if let Some(&u) = order.get(r + 32) {
+                    crate::hint::prefetch(&ev.caps[u as usize]);
+                }
+                let (p, odd) = caps.sorted_corners(r);
+                let exact = exact_orientation(p, l);
+                let exact = if odd { -exact } else { exact };
+                exact != ev.caps[t as usize] as i32
+            })
+            .count() as u64;
+    }
     // The corners of the triangle AHEAD on are prefetched: the caps are in
     // input order, scattered over a position table larger than L2.
     const AHEAD: usize = 16;
@@ -1389,21 +1413,37 @@ pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
                     }
                 }
             }
-            let p = t.map(|i| h(d.positions[i as usize]));
-            // det[P0; P1; P2; L] = −N·(L − P0·w): negative when L sees (P0, P1, P2) counter-clockwise.
-            // With every w = 1 it is orient3d(P0, P1, P2, L) (`det4_sign`).
-            let (t3, l3) = (p.map(|q| [q[0], q[1], q[2]]), [l[0], l[1], l[2]]);
-            let fast = if point {
-                crate::exact::orient3d_filtered(t3, l3)
-            } else if light[3] == 0.0 {
-                crate::exact::directional_filtered(t3, l3)
-            } else {
-                None
-            };
-            let exact = -fast.unwrap_or_else(|| crate::exact::det4_sign([p[0], p[1], p[2], l]));
-            exact != **c as i32
+            exact_orientation(t.map(|i| &d.positions[i as usize]), l) != **c as i32
         })
         .count() as u64
+}
+
+/// The exact sign of `det[P0; P1; P2; L]` negated (the contract's cap
+/// sign when f32 does not round it wrong), for the corners `p` and the
+/// homogeneous light `l` (f32 values): the f64 filters first, the exact
+/// predicate when they cannot tell. The corners come as references to
+/// their rows: copied into arrays, they went through the stack and were
+/// read back by loads wider than their stores, which the CPU cannot
+/// forward (the dragon's 16 lights took 174–183 against 88–109 ms in
+/// evaluation order, local timers).
+#[inline(always)]
+fn exact_orientation(p: [&[f32; 3]; 3], l: [f64; 4]) -> i32 {
+    let t3 = p.map(|q| q.map(|v| v as f64));
+    let l3 = [l[0], l[1], l[2]];
+    let fast = if l[3] == 1.0 {
+        crate::exact::orient3d_filtered(t3, l3)
+    } else if l[3] == 0.0 {
+        crate::exact::directional_filtered(t3, l3)
+    } else {
+        None
+    };
+    // det[P0; P1; P2; L] = −N·(L − P0·w): negative when L sees (P0, P1,
+    // P2) counter-clockwise. With every w = 1 it is orient3d(P0, P1, P2,
+    // L) (`det4_sign`).
+    -fast.unwrap_or_else(|| {
+        let h = |q: [f64; 3]| [q[0], q[1], q[2], 1.0];
+        crate::exact::det4_sign([h(t3[0]), h(t3[1]), h(t3[2]), l])
+    })
 }
 
 /// Whole verify report (`svpack verify --json`).
@@ -1647,7 +1687,11 @@ fn check_light(
         evaluate_into(d, light, strategy, ev);
         let c = check_closedness_indexed(d, &m.closedness, light, ev, scratch);
         if m.finite {
+            let t = std::time::Instant::now();
             lr.orientation_errors += orientation_errors(d, light, ev);
+            if std::env::var_os("SVTRACE").is_some() {
+                eprintln!("orient {:.2}", t.elapsed().as_secs_f64() * 1e3);
+            }
         }
         if let Some(index) = &m.index {
             let sh = crate::shadow::check_shadow(d, index, light, ev, &m.points);

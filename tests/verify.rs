@@ -548,6 +548,66 @@ fn closedness_merges_signed_zeros_at_infinity() {
     assert!(unbalanced > 0);
 }
 
+/// `orientation_errors` counts the caps whose evaluated sign differs from
+/// the exact orientation of their stored corners towards the light, as
+/// the exact predicate on every cap counts them: on the hard cases and a
+/// real model, under point and directional lights, with the reference
+/// evaluation, Kim's, and signs flipped or zeroed at random.
+#[test]
+fn orientation_errors_count_what_the_exact_predicate_counts() {
+    use svpack::verify::{choose_lights, orientation_errors};
+    let tmp = tempfile::tempdir().unwrap();
+    let inputs = hard_cases_and(tmp.path(), &["stanford-bunny.obj"]);
+    let mut bits = 0x2545_F491_4F6C_DD1Du64;
+    let (mut errors, mut checked) = (0, 0);
+    for input in inputs {
+        let out = tmp.path().join("x.svpk");
+        svpack::build::build_file(&input, &out, &Default::default()).unwrap();
+        let d = decode(&svpack::format::read_file(&out).unwrap(), 0);
+        if !d.positions.iter().flatten().all(|v| v.is_finite()) {
+            continue;
+        }
+        for light in choose_lights(&d, 8, 5) {
+            for s in [Strategy::Reference, Strategy::Kim] {
+                let mut ev = evaluate(&d, light, s);
+                for c in ev.caps.iter_mut() {
+                    bits ^= bits << 13;
+                    bits ^= bits >> 7;
+                    bits ^= bits << 17;
+                    match bits % 32 {
+                        0 => *c = -*c,
+                        1 => *c = 0,
+                        _ => {}
+                    }
+                }
+                let h = |p: [f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64, 1.0];
+                let l = light.map(|v| v as f64);
+                let want = d
+                    .caps
+                    .iter()
+                    .zip(&ev.caps)
+                    .filter(|&(t, &c)| {
+                        let p = t.map(|i| h(d.positions[i as usize]));
+                        -svpack::exact::det4_sign([p[0], p[1], p[2], l]) != c as i32
+                    })
+                    .count() as u64;
+                assert_eq!(
+                    orientation_errors(&d, light, &ev),
+                    want,
+                    "{} {s:?} {light:?}",
+                    input.display()
+                );
+                errors += want;
+                checked += d.caps.len();
+            }
+        }
+    }
+    assert!(
+        errors > 1000 && errors * 4 < checked as u64,
+        "{errors} of {checked}"
+    );
+}
+
 /// A damaged file whose side records name triangles the caps do not have:
 /// the ordered evaluation (`evaluate_ordered`) leaves those records' blocks
 /// to the input-order loop, and the whole evaluation still equals
