@@ -813,13 +813,7 @@ impl EdgeFunctions {
                 }
             })
         });
-        let cross = |a: [f64; 3], b: [f64; 3]| {
-            [
-                a[1] * b[2] - a[2] * b[1],
-                a[2] * b[0] - a[0] * b[2],
-                a[0] * b[1] - a[1] * b[0],
-            ]
-        };
+        let (cross, dot) = (cross3, dot3);
         // The absolute counterpart of `cross`: what bounds its rounding.
         let cross_abs = |a: [f64; 3], b: [f64; 3]| {
             let (a, b) = (a.map(f64::abs), b.map(f64::abs));
@@ -829,7 +823,6 @@ impl EdgeFunctions {
                 a[0] * b[1] + a[1] * b[0],
             ]
         };
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let r_abs = r.map(f64::abs);
         let factor = EXTRUSION_SLACK + 32.0 * f64::EPSILON / 2.0;
         let edges = [(0, 1), (1, 2), (2, 0)].map(|(k, l)| {
