@@ -640,12 +640,7 @@ impl SideCandidates {
     fn new(sides: &[Emitted], light: Light, dir: [f32; 3], samples: &[[f32; 3]]) -> SideCandidates {
         let dh = [dir[0] as f64, dir[1] as f64, dir[2] as f64, 0.0];
         let (u, v) = plane_basis(dir);
-        let proj = |q: [f64; 3]| {
-            [
-                q[0] * u[0] + q[1] * u[1] + q[2] * u[2],
-                q[0] * v[0] + q[1] * v[1] + q[2] * v[2],
-            ]
-        };
+        let proj = |q: [f64; 3]| [dot3(q, u), dot3(q, v)];
         let mut lo = [f64::INFINITY; 2];
         let mut hi = [f64::NEG_INFINITY; 2];
         for s in samples {

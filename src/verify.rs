@@ -854,10 +854,10 @@ impl ClosednessIndex {
     /// Lists the pairs of `d`: a counting sort of the drawn pairs by their
     /// smaller id, then each smaller id's few entries (about nine on a
     /// closed mesh) sorted by the larger one, so that pairs come in
-    /// ascending `(smaller, larger)` order. Why not one sort of every pair's key, as
-    /// before: the dragon's 3.9M pairs took 240–259 ms to number that way
-    /// on one thread, against 88–100 ms for this (local timers;
-    /// benches/ROUNDS.md, Forty-first round).
+    /// ascending `(smaller, larger)` order. Why not one sort of every
+    /// pair's key, as before: the dragon's 3.9M pairs took 240–259 ms to
+    /// number that way on one thread, against 88–100 ms for this (local
+    /// timers; benches/ROUNDS.md, Forty-first round).
     pub fn new(d: &Decoded) -> ClosednessIndex {
         let unknown_cap = d.caps.iter().flatten().any(|&i| i == UNKNOWN);
         let unknown_record = d.buckets.iter().any(|b| {
@@ -1428,7 +1428,8 @@ pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
 /// evaluation order, local timers).
 #[inline(always)]
 fn exact_orientation(p: [&[f32; 3]; 3], l: [f64; 4]) -> i32 {
-    let t3 = p.map(|q| q.map(|v| v as f64));
+    let f = |q: &[f32; 3]| [q[0] as f64, q[1] as f64, q[2] as f64];
+    let t3 = [f(p[0]), f(p[1]), f(p[2])];
     let l3 = [l[0], l[1], l[2]];
     let fast = if l[3] == 1.0 {
         crate::exact::orient3d_filtered(t3, l3)
@@ -1687,11 +1688,7 @@ fn check_light(
         evaluate_into(d, light, strategy, ev);
         let c = check_closedness_indexed(d, &m.closedness, light, ev, scratch);
         if m.finite {
-            let t = std::time::Instant::now();
             lr.orientation_errors += orientation_errors(d, light, ev);
-            if std::env::var_os("SVTRACE").is_some() {
-                eprintln!("orient {:.2}", t.elapsed().as_secs_f64() * 1e3);
-            }
         }
         if let Some(index) = &m.index {
             let sh = crate::shadow::check_shadow(d, index, light, ev, &m.points);
