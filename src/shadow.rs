@@ -24,6 +24,7 @@
 //! is computed once per direction.
 
 use crate::exact::{H, Meet, Point, meet, meet_points, passes_beside};
+use crate::hint::prefetch_ptr;
 use crate::multiplicity::{Light, side_corner, to_infinity};
 use crate::verify::{Decoded, Evaluation, Rng};
 use rayon::prelude::*;
@@ -368,23 +369,25 @@ const EXTRUSION_SLACK: f64 = 1.0 / (1u64 << 20) as f64;
 /// combination of its corners' offsets from the light and of its
 /// directions. So the ray from a sample can meet it only when the
 /// sample's plane is in that wedge. Ordered around the pencil, the
-/// samples in a wedge are one range, found by two binary searches: on the
-/// dragon a side triangle's wedge holds well under one of 256 samples,
-/// where the grid of [`SideCandidates`] visits about 70.
+/// samples in a wedge are one range, found from a table of bins
+/// ([`KeyBins`]): on the dragon a side triangle's wedge holds well under
+/// one of 256 samples, where the grid of [`SideCandidates`] visits about
+/// 70.
 ///
 /// Keys: for a point light L, the pseudo-angle ([`pseudo_angle`]) of
 /// `(P − L) × d` in a basis of the plane normal to `d` (the cross product
 /// is the same for every point of the ray, so a far hit point adds no
-/// rounding); for a directional light, `P · (L × d)`. A side triangle's
-/// wedge is its corners' keys (a finite corner's from its offset from the
-/// light; a corner at infinity's from its direction, for a directional
-/// light none: its direction is `−L`), widened by their error bounds: f64
+/// rounding); for a directional light, `P · (L × d)`. A side quad's
+/// wedge, for both its triangles, runs between the keys of its finite
+/// corners A and B ([`Fan::side_wedge`]: each corner at infinity lies in
+/// the plane of its finite corner), widened by their error bounds: f64
 /// rounding, and for a point light the f32 rounding of a direction at
-/// infinity (relative 2^-24), which covers the exact extrusion too. A
-/// triangle whose wedge is not certainly narrower than a half-turn (its
-/// corners around the line), or whose keys are uncertain (a corner near
-/// the line), has no wedge: the grid decides. Samples whose keys are
-/// uncertain (near the line) are tested against every wedge.
+/// infinity (relative 2^-24), which covers the exact extrusion too. A quad
+/// whose wedge is not certainly narrower than a half-turn (the light
+/// about on the line through A and B), or whose keys are uncertain (a
+/// corner near the light's line), has no wedge: the grid decides. Samples
+/// whose keys are uncertain (near the line) are tested against every
+/// wedge.
 struct Fan {
     kind: FanKind,
     /// `(key, sample)` of the samples with certain keys, by key.
@@ -393,6 +396,74 @@ struct Fan {
     always: Vec<u32>,
     /// The largest error of a key in `sorted`.
     sample_slack: f64,
+    /// Where a key falls in `sorted`.
+    bins: KeyBins,
+}
+
+/// Where a key falls among sorted keys, read from a table of equal bins
+/// over their range, where a key's bin mostly holds no other key. Why not
+/// a binary search: with 256 samples its eight dependent steps, twice per
+/// side quad, made [`SideCandidates::new`] take 47.6–53.8 ms for the
+/// dragon's 16 lights instead of 38.6–40.3 (one thread, local timers,
+/// benches/ROUNDS.md, Forty-third round).
+struct KeyBins {
+    /// The smallest key.
+    low: f64,
+    /// Bins per unit of key.
+    scale: f64,
+    /// `first[b]`: how many keys lie in the bins below `b` (one more entry
+    /// than bins).
+    first: Vec<u32>,
+}
+
+impl KeyBins {
+    /// Bins per key.
+    const PER_KEY: usize = 4;
+
+    /// The table over `sorted`'s keys (ascending, finite).
+    fn new(sorted: &[(f64, u32)]) -> KeyBins {
+        let count = Self::PER_KEY * sorted.len() + 1;
+        let (low, high) = match (sorted.first(), sorted.last()) {
+            (Some(a), Some(b)) => (a.0, b.0),
+            _ => (0.0, 0.0),
+        };
+        let scale = if high > low {
+            (count - 1) as f64 / (high - low)
+        } else {
+            0.0
+        };
+        let mut bins = KeyBins {
+            low,
+            scale,
+            first: vec![0; count + 1],
+        };
+        for &(key, _) in sorted {
+            let b = bins.bin(key);
+            bins.first[b + 1] += 1;
+        }
+        for b in 0..count {
+            bins.first[b + 1] += bins.first[b];
+        }
+        bins
+    }
+
+    /// The bin of `x`, monotone in `x`: a key in a lower bin than `x` is
+    /// below `x`, and one in a higher bin is above it (NaN: bin 0).
+    #[inline(always)]
+    fn bin(&self, x: f64) -> usize {
+        ((x - self.low) * self.scale).clamp(0.0, (self.first.len() - 2) as f64) as usize
+    }
+
+    /// How many of `sorted`'s keys are below `x` (or, `inclusive`, at most
+    /// `x`): `partition_point` of that, by a scan of `x`'s bin.
+    #[inline(always)]
+    fn count(&self, sorted: &[(f64, u32)], x: f64, inclusive: bool) -> usize {
+        let mut i = self.first[self.bin(x)] as usize;
+        while i < sorted.len() && (sorted[i].0 < x || inclusive && sorted[i].0 == x) {
+            i += 1;
+        }
+        i
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -493,6 +564,7 @@ impl Fan {
             sorted: Vec::with_capacity(samples.len()),
             always: Vec::new(),
             sample_slack: 0.0,
+            bins: KeyBins::new(&[]),
         };
         let directional = matches!(kind, FanKind::Directional { .. });
         for (j, s) in samples.iter().enumerate() {
@@ -508,6 +580,7 @@ impl Fan {
             }
         }
         fan.sorted.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        fan.bins = KeyBins::new(&fan.sorted);
         Some(fan)
     }
 
@@ -550,39 +623,36 @@ impl Fan {
         }
     }
 
-    /// The range of keys a ray must have to meet the triangle with
-    /// corners `t` (emitted; directions at infinity that f32 rounded by a
-    /// relative 2^-24 at most), or `None` when the fan cannot tell. For a
-    /// point light the range starts in `[0, 4)` and may run past 4, around
-    /// the turn.
-    fn wedge(&self, t: &[H; 3]) -> Option<(f64, f64)> {
-        // Each direction at infinity: one f32 rounding of `P − L`.
-        let rel = |c: &H| {
-            if c[3] == 0.0 {
-                1.0 / (1u64 << 24) as f64
-            } else {
-                0.0
-            }
-        };
+    /// The range of keys a ray must have to meet either triangle of the
+    /// side quad on `a`, `b` (as emitted, or extruded exactly), or `None`
+    /// when the fan cannot tell. For a point light the range starts in
+    /// `[0, 4)` and may run past 4, around the turn.
+    ///
+    /// Every point of the quad is the light plus a positive combination of
+    /// `a − L` and `b − L` (a point light: its corners at infinity are those
+    /// directions, rounded by `toInf` by a relative 2^-24 at most) or
+    /// spanned by `a`, `b` and the direction `−L` (a directional light, the
+    /// pencil's own direction: the same key): so its keys run between the
+    /// keys of `a` and `b`, for a point light the shorter way round. Each
+    /// finite corner's key, with the error of a direction so rounded, also
+    /// holds the key of its corner at infinity, emitted or exact. One wedge
+    /// from two keys for both triangles: six keys, one per corner of each
+    /// triangle, took about twice as long (local timers, benches/ROUNDS.md,
+    /// Forty-third round).
+    fn side_wedge(&self, a: [f32; 3], b: [f32; 3]) -> Option<(f64, f64)> {
         match self.kind {
             FanKind::Point { .. } => {
-                let mut k = [(0.0, 0.0); 3];
-                for (k, c) in k.iter_mut().zip(t) {
-                    *k = self.key(*c, rel(c))?;
-                }
-                let err = k[0].1.max(k[1].1).max(k[2].1) + self.sample_slack;
-                let mut a = k.map(|k| k.0);
-                a.sort_unstable_by(f64::total_cmp);
-                // The largest gap between neighbours around the turn; the
-                // wedge is the rest, which must stay under a half-turn
-                // (2) even with every key off by its error.
-                let gaps = [a[1] - a[0], a[2] - a[1], 4.0 - a[2] + a[0]];
-                let (lo, hi) = if gaps[2] >= gaps[0] && gaps[2] >= gaps[1] {
-                    (a[0], a[2])
-                } else if gaps[0] >= gaps[1] {
-                    (a[1], a[0] + 4.0)
+                let rel = 1.0 / (1u64 << 24) as f64;
+                let (ka, ea) = self.key(fin(a), rel)?;
+                let (kb, eb) = self.key(fin(b), rel)?;
+                let err = ea.max(eb) + self.sample_slack;
+                let (lo, hi) = (ka.min(kb), ka.max(kb));
+                // The shorter way round, which must stay under a half-turn
+                // (2) even with both keys off by their error.
+                let (lo, hi) = if hi - lo <= 2.0 {
+                    (lo, hi)
                 } else {
-                    (a[2], a[1] + 4.0)
+                    (hi, lo + 4.0)
                 };
                 // Around the turn from a start in [0, 4).
                 let (lo, hi) = if lo - err < 0.0 {
@@ -593,21 +663,12 @@ impl Fan {
                 (hi - lo < 2.0).then_some((lo, hi))
             }
             FanKind::Directional { .. } => {
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                for c in t {
-                    match c[3] {
-                        1.0 => {
-                            let (key, err) = self.key(*c, 0.0)?;
-                            lo = lo.min(key - err);
-                            hi = hi.max(key + err);
-                        }
-                        // A direction of a directional light's side
-                        // triangle is `−L`, whose key is exactly 0.
-                        0.0 => {}
-                        _ => return None,
-                    }
-                }
-                (lo <= hi).then_some((lo - self.sample_slack, hi + self.sample_slack))
+                let (ka, ea) = self.key(fin(a), 0.0)?;
+                let (kb, eb) = self.key(fin(b), 0.0)?;
+                Some((
+                    (ka - ea).min(kb - eb) - self.sample_slack,
+                    (ka + ea).max(kb + eb) + self.sample_slack,
+                ))
             }
         }
     }
@@ -617,8 +678,8 @@ impl Fan {
     /// `hi − lo` under 2), then with every sample of [`Fan::always`].
     fn for_each_in(&self, (lo, hi): (f64, f64), mut f: impl FnMut(u32)) {
         let mut range = |lo: f64, hi: f64| {
-            let from = self.sorted.partition_point(|e| e.0 < lo);
-            let to = self.sorted.partition_point(|e| e.0 <= hi);
+            let from = self.bins.count(&self.sorted, lo, false);
+            let to = self.bins.count(&self.sorted, hi, true);
             for e in &self.sorted[from..to.max(from)] {
                 f(e.1);
             }
@@ -686,29 +747,39 @@ impl SideCandidates {
             .collect();
         let fan = Fan::new(light, dir, samples);
         let mut lists = vec![Vec::new(); samples.len()];
+        // The quad's wedge, shared by its two triangles (`emitted_sides`
+        // lists them one after the other).
+        let mut quad_wedge: Option<(&Emitted, Option<(f64, f64)>)> = None;
         for (i, e) in sides.iter().enumerate() {
-            let corners = e.corners(light);
-            // Made for the first sample tested, if any.
+            // Made when first needed: most triangles' wedges hold no sample.
+            let mut corners = None;
             let mut linear = None;
             let mut test = |j: u32| {
                 let (q, q_abs) = &moved[j as usize];
+                let corners = corners.get_or_insert_with(|| e.corners(light));
                 let linear = linear.get_or_insert_with(|| {
-                    EdgeFunctions::new(&corners, [dh[0], dh[1], dh[2]], origin)
+                    EdgeFunctions::new(corners, [dh[0], dh[1], dh[2]], origin)
                 });
                 if linear.as_ref().is_some_and(|f| f.beside(q, q_abs)) {
                     return;
                 }
                 let p = &points[j as usize];
-                if !passes_beside(p, &dh, &corners, EXTRUSION_SLACK) {
+                if !passes_beside(p, &dh, corners, EXTRUSION_SLACK) {
                     lists[j as usize].push(i as u32);
                 }
             };
-            if let Some(fan) = &fan
-                && let Some(wedge) = fan.wedge(&corners)
-            {
-                fan.for_each_in(wedge, &mut test);
-                continue;
+            if let Some(fan) = &fan {
+                let wedge = match quad_wedge {
+                    Some((q, w)) if q.a == e.a && q.b == e.b => w,
+                    _ => fan.side_wedge(e.a, e.b),
+                };
+                quad_wedge = Some((e, wedge));
+                if let Some(wedge) = wedge {
+                    fan.for_each_in(wedge, &mut test);
+                    continue;
+                }
             }
+            let corners = e.corners(light);
             let mut blo = [f64::INFINITY; 2];
             let mut bhi = [f64::NEG_INFINITY; 2];
             for c in &corners {
@@ -877,14 +948,21 @@ impl Emitted {
 
     /// The corners as emitted (corners at infinity rounded by the
     /// contract's `toInf`).
+    ///
+    /// Written out rather than read from an array of the quad's corners by
+    /// [`Emitted::ids`]: that array, stored and at once read back at a
+    /// computed place, stalled the CPU on every triangle (the loads waited
+    /// for the stores; `perf annotate` of [`SideCandidates::new`]). A test
+    /// checks both give the same.
+    #[inline(always)]
     fn corners(&self, light: Light) -> [H; 3] {
-        let quad = [
-            fin(self.a),
-            fin(self.b),
-            inf(self.a, light),
-            inf(self.b, light),
-        ];
-        self.ids().map(|i| quad[i])
+        let (a, b, a_inf) = (fin(self.a), fin(self.b), inf(self.a, light));
+        match (self.second, self.m > 0) {
+            (false, true) => [a_inf, b, a],
+            (true, true) => [b, a_inf, inf(self.b, light)],
+            (false, false) => [a, b, a_inf],
+            (true, false) => [inf(self.b, light), a_inf, b],
+        }
     }
 
     /// The same triangle with its corners at infinity extruded exactly.
@@ -980,18 +1058,40 @@ fn usable_exact(c: &[Point; 3]) -> bool {
 /// stencil weight, as emitted and as extruded exactly.
 fn emitted_sides(d: &Decoded, light: Light, ev: &Evaluation) -> Vec<Emitted> {
     let mut sides: Vec<Emitted> = Vec::new();
+    let mut silhouette: Vec<u32> = Vec::new();
     for (b, ms) in d.buckets.iter().zip(&ev.sides) {
-        // A and B as the record stores them, what the shader extrudes (in a
-        // damaged file they may be no cap's corner, and have no id).
-        for (r, &m) in b.data.chunks_exact(4 * (2 + b.k)).zip(ms) {
-            if m == 0 {
-                continue;
+        // The silhouette is a few percent of the records, scattered over
+        // megabytes: listed first, so each record's row is asked for
+        // `SIDES_AHEAD` records before it is read. Read during the scan,
+        // each was a cache miss waited for in turn (the scan between two
+        // of them outran the CPU's window): this function took 82 ms of
+        // the dragon's 16 lights instead of 41 (one thread, local timers,
+        // benches/ROUNDS.md, Forty-third round).
+        silhouette.clear();
+        silhouette.extend(
+            ms.iter()
+                .enumerate()
+                .filter(|&(_, &m)| m != 0)
+                .map(|(i, _)| i as u32),
+        );
+        let row = 4 * (2 + b.k);
+        sides.reserve(2 * silhouette.len());
+        for (n, &i) in silhouette.iter().enumerate() {
+            if let Some(&next) = silhouette.get(n + SIDES_AHEAD) {
+                // A and B: the row's first 28 bytes, which may cross a line.
+                let at = b.data.as_ptr().wrapping_add(next as usize * row);
+                prefetch_ptr(at);
+                prefetch_ptr(at.wrapping_add(6));
             }
+            // A and B as the record stores them, what the shader extrudes
+            // (in a damaged file they may be no cap's corner, and have no
+            // id).
+            let r = &b.data[i as usize * row..][..7];
             for second in [false, true] {
                 let e = Emitted {
                     a: [r[0], r[1], r[2]],
                     b: [r[4], r[5], r[6]],
-                    m: m as i32,
+                    m: ms[i as usize] as i32,
                     second,
                 };
                 // A light exactly on A or B extrudes it to (0,0,0,0), which is
@@ -1004,6 +1104,9 @@ fn emitted_sides(d: &Decoded, light: Light, ev: &Evaluation) -> Vec<Emitted> {
     }
     sides
 }
+
+/// How many silhouette records ahead [`emitted_sides`] prefetches a row.
+const SIDES_AHEAD: usize = 16;
 
 /// Relative growth of the hierarchy's boxes for the back caps' query:
 /// twice `toInf`'s rounding (see [`back_term`]).
@@ -1265,14 +1368,14 @@ mod tests {
     /// random samples, samples next to the light's line, and samples on
     /// the triangles' edges.
     #[test]
-    fn fan_wedges_hold_every_ray_that_meets() {
+    fn fan_side_wedges_hold_every_ray_that_meets() {
         let mut rng = crate::verify::Rng::new(11);
         // A uniform value in (−scale, scale), as f32.
         let sym =
             |rng: &mut crate::verify::Rng, scale: f64| ((rng.unit() - 0.5) * 2.0 * scale) as f32;
         let (mut met, mut wedged, mut wrapped, mut listed, mut pairs, mut count) =
             (0, 0, 0, 0, 0, 0);
-        let (trials, per_trial) = (240, 40);
+        let (trials, per_trial) = (240, 24);
         for trial in 0..trials {
             let dir = DIRECTIONS[trial % DIRECTIONS.len()];
             let dv = dir.map(|x| x as f64);
@@ -1284,39 +1387,41 @@ mod tests {
             let near = |rng: &mut crate::verify::Rng, s: f32, off: f64| {
                 [0, 1, 2].map(|k| l[k] + s * dir[k] + sym(rng, off))
             };
-            // Triangles: as corners and, for side triangles of a point
-            // light, as extruded exactly.
-            let mut tris: Vec<([H; 3], Option<[Point; 3]>)> = Vec::new();
             let (u, v) = plane_basis(dir);
+            // `l + a·u + b·v + s·dir`, as f32.
+            let at = |a: f64, b: f64, s: f64| {
+                [0, 1, 2].map(|k| (l[k] as f64 + a * u[k] + b * v[k] + s * dv[k]) as f32)
+            };
+            // Side quads (A, B, m), each with its two triangles: as emitted
+            // and, for a point light, as extruded exactly.
+            let mut quads = Vec::new();
             for t in 0..per_trial {
-                if point && t % 8 == 4 {
-                    // A corner at infinity along `v`, whose key is 0 (or just
-                    // under 4), and two corners whose keys are under 2: a
-                    // wedge starting at the turn's start.
-                    let mut c = [[v[0], v[1], v[2], 0.0]; 3];
-                    for c in &mut c[1..] {
-                        let (a, b, s) = (-0.1 - rng.unit(), sym(&mut rng, 1.0), sym(&mut rng, 2.0));
-                        *c = fin([0, 1, 2].map(|k| {
-                            (l[k] as f64 + a * u[k] + b as f64 * v[k] + s as f64 * dv[k]) as f32
-                        }));
-                    }
-                    tris.push((c, None));
-                } else if point && t % 2 == 0 {
-                    let c = [0; 3].map(|_| {
-                        let s = sym(&mut rng, 2.0);
-                        if rng.unit() > 0.65 {
-                            let d = [0; 3].map(|_| sym(&mut rng, 1.0) as f64);
-                            [d[0], d[1], d[2], 0.0]
-                        } else {
-                            fin(near(&mut rng, s, 1.0))
-                        }
-                    });
-                    if c.iter().any(|c| c[3] == 1.0) {
-                        tris.push((c, None));
-                    }
+                let (a, b) = if point && t % 8 == 4 {
+                    // A's key about 0 (a little over, or just under 4), B's
+                    // under 2: a wedge starting at the turn's start.
+                    let a = at(
+                        sym(&mut rng, 1e-3) as f64,
+                        0.1 + rng.unit(),
+                        sym(&mut rng, 2.0) as f64,
+                    );
+                    let b = at(
+                        -0.1 - rng.unit(),
+                        sym(&mut rng, 1.0) as f64,
+                        sym(&mut rng, 2.0) as f64,
+                    );
+                    (a, b)
+                } else if point && t % 8 == 6 {
+                    // L nearly on the segment AB: the keys half a turn
+                    // apart, up to B's rounding to f32.
+                    let s = sym(&mut rng, 2.0);
+                    let a = near(&mut rng, s, 1.0);
+                    let c = 0.2 + 2.0 * rng.unit();
+                    let b =
+                        [0, 1, 2].map(|k| (l[k] as f64 - c * (a[k] as f64 - l[k] as f64)) as f32);
+                    (a, b)
                 } else {
-                    // A side triangle; some extrude A nearly along the
-                    // rays: A − L about along `dir`.
+                    // Some extrude A nearly along the rays: A − L about
+                    // along `dir`.
                     let a = if point && t % 5 == 1 {
                         let s = 1.0 + rng.unit() as f32;
                         near(&mut rng, s, 1e-3)
@@ -1325,12 +1430,14 @@ mod tests {
                         near(&mut rng, s, 1.0)
                     };
                     let s = sym(&mut rng, 2.0);
-                    let b = near(&mut rng, s, 1.0);
-                    for second in [false, true] {
-                        let e = Emitted { a, b, m: 1, second };
-                        tris.push((e.corners(light), point.then(|| e.exact(light))));
-                    }
-                }
+                    (a, near(&mut rng, s, 1.0))
+                };
+                let m = if rng.unit() < 0.5 { 1 } else { -2 };
+                let tris = [false, true].map(|second| {
+                    let e = Emitted { a, b, m, second };
+                    (e.corners(light), point.then(|| e.exact(light)))
+                });
+                quads.push((a, b, tris));
             }
             let mut samples: Vec<[f32; 3]> = (0..120)
                 .map(|_| [0; 3].map(|_| sym(&mut rng, 3.0)))
@@ -1341,9 +1448,9 @@ mod tests {
                 samples.push(near(&mut rng, s, off));
             }
             // On the triangles' edges, from a finite corner to the next
-            // corner (a point or a direction; for a side triangle also the
+            // corner (a point or a direction; for a point light also the
             // exact extrusion), then back along the ray.
-            for (t, exact) in &tris {
+            for (t, exact) in quads.iter().flat_map(|q| &q.2) {
                 for (i, j) in [(0, 1), (1, 2), (2, 0)] {
                     if t[i][3] != 1.0 {
                         continue;
@@ -1364,10 +1471,10 @@ mod tests {
                 }
             }
             let fan = Fan::new(light, dir, &samples).expect("a fan");
-            count += tris.len();
-            for (t, exact) in &tris {
+            count += quads.len();
+            for (a, b, tris) in &quads {
                 let mut list = Vec::new();
-                match fan.wedge(t) {
+                match fan.side_wedge(*a, *b) {
                     Some(w) => {
                         wedged += 1;
                         wrapped += point as usize * (w.1 >= 4.0) as usize;
@@ -1383,17 +1490,19 @@ mod tests {
                 pairs += samples.len();
                 for (j, s) in samples.iter().enumerate() {
                     let p = fin(*s);
-                    let hit = meet(p, dh, *t) != Meet::None
-                        || exact.is_some_and(|x| {
-                            usable_exact(&x)
-                                && meet_points(Point::H(p), Point::H(dh), x) != Meet::None
-                        });
-                    if hit {
-                        met += 1;
-                        assert!(
-                            list.contains(&(j as u32)),
-                            "trial {trial}, light {light:?}, dir {dir:?}, triangle {t:?}, sample {s:?}: met but not listed"
-                        );
+                    for (t, exact) in tris {
+                        let hit = meet(p, dh, *t) != Meet::None
+                            || exact.is_some_and(|x| {
+                                usable_exact(&x)
+                                    && meet_points(Point::H(p), Point::H(dh), x) != Meet::None
+                            });
+                        if hit {
+                            met += 1;
+                            assert!(
+                                list.contains(&(j as u32)),
+                                "trial {trial}, light {light:?}, dir {dir:?}, triangle {t:?}, sample {s:?}: met but not listed"
+                            );
+                        }
                     }
                 }
             }
@@ -1404,6 +1513,71 @@ mod tests {
         assert!(wrapped > 100, "{wrapped}");
         assert!(wedged * 10 > 8 * count, "{wedged} of {count}");
         assert!(listed * 2 < pairs, "{listed} of {pairs}");
+    }
+
+    /// `KeyBins::count` answers what `partition_point` answers, on keys
+    /// with ties and clusters, at the keys, between and beyond them.
+    #[test]
+    fn key_bins_count_what_a_binary_search_counts() {
+        let mut rng = crate::verify::Rng::new(5);
+        let mut checked = 0;
+        for trial in 0..200 {
+            let n = trial % 40;
+            let mut keys: Vec<(f64, u32)> = (0..n)
+                .map(|j| {
+                    let x = match rng.below(4) {
+                        0 => rng.below(3) as f64,
+                        1 => 1.0 + 1e-12 * rng.unit(),
+                        2 => -1e6 * rng.unit(),
+                        _ => 4.0 * rng.unit(),
+                    };
+                    (x, j as u32)
+                })
+                .collect();
+            keys.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            let bins = KeyBins::new(&keys);
+            let mut queries: Vec<f64> = keys.iter().map(|k| k.0).collect();
+            queries.extend(keys.iter().map(|k| k.0 + 1e-13));
+            queries.extend(keys.iter().map(|k| k.0 - 1e-13));
+            queries.extend([-1e9, 1e9, -0.0, 0.5, f64::NAN, f64::INFINITY]);
+            for x in queries {
+                for inclusive in [false, true] {
+                    let want = keys.partition_point(|e| e.0 < x || inclusive && e.0 == x);
+                    assert_eq!(
+                        bins.count(&keys, x, inclusive),
+                        want,
+                        "{n} keys, x {x}, inclusive {inclusive}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 10_000, "{checked}");
+    }
+
+    /// `Emitted::corners`, written out per case, picks the quad's corners
+    /// in the order `side_corner` gives the draws.
+    #[test]
+    fn emitted_corners_follow_the_draw_order() {
+        for light in [[0.3, -0.2, 0.9, 1.0], [0.3, -0.2, 0.9, 0.0]] {
+            for m in [1, 2, -1, -3] {
+                for second in [false, true] {
+                    let e = Emitted {
+                        a: [1.0, 2.0, 3.0],
+                        b: [-0.5, 0.25, 4.0],
+                        m,
+                        second,
+                    };
+                    let quad = [fin(e.a), fin(e.b), inf(e.a, light), inf(e.b, light)];
+                    let bits = |t: [H; 3]| t.map(|c| c.map(f64::to_bits));
+                    assert_eq!(
+                        bits(e.corners(light)),
+                        bits(e.ids().map(|i| quad[i])),
+                        "m {m}, second {second}"
+                    );
+                }
+            }
+        }
     }
 
     /// The candidate lists against every side triangle: a side that a
