@@ -53,7 +53,9 @@ fn hom(p: [f32; 4]) -> H {
 /// the order of its leaves (see [`ShadowIndex::new`]).
 struct Bvh {
     /// Per node: min xyz, max xyz.
-    boxes: Vec<[f64; 6]>,
+    /// Per node: its box, `[min x, min y, min z, max x, max y, max z]`, in
+    /// f32 as the corners are (exact; half the memory of f64 boxes).
+    boxes: Vec<[f32; 6]>,
     /// Per node: (first, count, 0) for leaves (count > 0), (left, 0, right)
     /// for inner nodes; leaves hold the triangles `first..first + count`.
     nodes: Vec<(u32, u32, u32)>,
@@ -64,9 +66,11 @@ impl Bvh {
     /// (ascending): each node split where the highest bit that differs in
     /// its range turns on, down to leaves of four or fewer triangles.
     fn new(tris: &[[[f32; 3]; 3]], codes: &[u64]) -> Bvh {
+        // At most 2n − 1 nodes (every leaf holds a triangle), reserved so
+        // the vectors never move; the pages not written are never touched.
         let mut bvh = Bvh {
-            boxes: Vec::with_capacity(tris.len() / 2),
-            nodes: Vec::with_capacity(tris.len() / 2),
+            boxes: Vec::with_capacity(2 * tris.len()),
+            nodes: Vec::with_capacity(2 * tris.len()),
         };
         if !tris.is_empty() {
             bvh.build(tris, codes, 0, tris.len());
@@ -82,17 +86,17 @@ impl Bvh {
         self.boxes.push([0.0; 6]);
         if count <= 4 {
             let mut b = [
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::NEG_INFINITY,
-                f64::NEG_INFINITY,
+                f32::INFINITY,
+                f32::INFINITY,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::NEG_INFINITY,
+                f32::NEG_INFINITY,
             ];
             for p in tris[first..first + count].iter().flatten() {
                 for k in 0..3 {
-                    b[k] = b[k].min(p[k] as f64);
-                    b[k + 3] = b[k + 3].max(p[k] as f64);
+                    b[k] = b[k].min(p[k]);
+                    b[k + 3] = b[k + 3].max(p[k]);
                 }
             }
             self.boxes[node as usize] = b;
@@ -175,7 +179,8 @@ fn spread3(x: u64) -> u64 {
 /// Conservative slab test (boxes padded well beyond f64 rounding, and
 /// further by `grow` times their largest coordinate's magnitude plus
 /// `grow_abs`).
-fn hits(b: &[f64; 6], p: [f64; 3], dir: [f64; 3], t_max: f64, grow: f64, grow_abs: f64) -> bool {
+fn hits(b: &[f32; 6], p: [f64; 3], dir: [f64; 3], t_max: f64, grow: f64, grow_abs: f64) -> bool {
+    let b = b.map(|v| v as f64);
     let (mut t0, mut t1) = (0.0f64, t_max);
     for k in 0..3 {
         let pad = (1e-9 + grow) * (b[k + 3] - b[k]).abs().max(b[k].abs()).max(b[k + 3].abs())
@@ -214,14 +219,19 @@ pub struct ShadowIndex {
 
 impl ShadowIndex {
     /// Indexes the caps triangles of a decoded mesh: sorted by the Morton
-    /// code of their corner sums (21 bits per axis over the sums' bounds;
-    /// ties by id, so the order is fully determined), then a hierarchy over
-    /// that order (`Bvh::new`). Why not the median along each node's
-    /// widest axis, as before: a selection per node cost about three
-    /// comparisons per triangle per level, and with the triangles read
-    /// through ids it took 308–346 ms on the 871k-triangle dragon, against
-    /// 159–164 ms for this (one thread, local timers; benches/ROUNDS.md,
-    /// Forty-first round).
+    /// code of their corner sums (21 bits per axis over three times the
+    /// positions' bounds; ties by id, so the order is fully determined),
+    /// then a hierarchy over that order (`Bvh::new`). Why not the median
+    /// along each node's widest axis, as before: a selection per node cost
+    /// about three comparisons per triangle per level, and with the
+    /// triangles read through ids it took 308–346 ms on the 871k-triangle
+    /// dragon, against 159–164 ms for this (one thread, local timers;
+    /// benches/ROUNDS.md, Forty-first round). Since the forty-third round
+    /// the codes are sorted by the weld's radix sort instead of rayon's
+    /// comparison sort (30.8–31.3 → 18.7–18.9 ms), over bounds found
+    /// without a pass over the triangles (15.0–18.4 → 0.2 ms), and the
+    /// hierarchy's boxes are f32 with room reserved for every node (its
+    /// build 39.6–41.8 → 32.3–35.4 ms; local timers, benches/ROUNDS.md).
     pub fn new(d: &Decoded) -> ShadowIndex {
         let sum = |t: &[u32; 3]| {
             [0, 1, 2].map(|k| {
@@ -230,28 +240,12 @@ impl ShadowIndex {
                     .sum::<f64>()
             })
         };
-        let (lo, hi) = d
-            .caps
-            .par_iter()
-            .fold(
-                || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
-                |(lo, hi), t| {
-                    let s = sum(t);
-                    (
-                        [0, 1, 2].map(|k| lo[k].min(s[k])),
-                        [0, 1, 2].map(|k| hi[k].max(s[k])),
-                    )
-                },
-            )
-            .reduce(
-                || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
-                |(a, b), (c, e)| {
-                    (
-                        [0, 1, 2].map(|k| a[k].min(c[k])),
-                        [0, 1, 2].map(|k| b[k].max(e[k])),
-                    )
-                },
-            );
+        // Bounds of the corner sums: three times the positions' (a pass
+        // over the positions in order, where the sums' own bounds took one
+        // over every triangle's corners, 15–18 ms of the dragon's). Any
+        // bounds give a valid order; these may make it a little coarser.
+        let (lo, hi) = crate::build::bounds(&d.positions);
+        let (lo, hi) = (lo.map(|v| 3.0 * v as f64), hi.map(|v| 3.0 * v as f64));
         let top = ((1u64 << 21) - 1) as f64;
         let scale = [0, 1, 2].map(|k| {
             if hi[k] > lo[k] {
@@ -260,21 +254,24 @@ impl ShadowIndex {
                 0.0
             }
         });
-        let mut coded: Vec<(u64, u32)> = d
+        // Each triangle's code above its number, sorted by the weld's
+        // radix sort (which orders by the high 96 bits: here the code and
+        // the number, the order of `(code, number)` pairs).
+        let mut words: Vec<u128> = d
             .caps
             .par_iter()
             .enumerate()
             .map(|(i, t)| {
                 let s = sum(t);
                 let q = [0, 1, 2].map(|k| ((s[k] - lo[k]) * scale[k]).clamp(0.0, top) as u64);
-                (
-                    spread3(q[0]) << 2 | spread3(q[1]) << 1 | spread3(q[2]),
-                    i as u32,
-                )
+                let code = spread3(q[0]) << 2 | spread3(q[1]) << 1 | spread3(q[2]);
+                (code as u128) << 64 | (i as u128) << 32
             })
             .collect();
-        coded.par_sort_unstable();
-        let (codes, ids): (Vec<u64>, Vec<u32>) = coded.into_iter().unzip();
+        crate::weld::sort_position_words(&mut words);
+        let codes: Vec<u64> = words.iter().map(|&w| (w >> 64) as u64).collect();
+        let ids: Vec<u32> = words.iter().map(|&w| (w >> 32) as u32).collect();
+        drop(words);
         let tris: Vec<[[f32; 3]; 3]> = ids
             .par_iter()
             .map(|&i| d.caps[i as usize].map(|c| d.positions[c as usize]))

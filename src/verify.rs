@@ -123,9 +123,12 @@ fn decode_steps(file: &SvpkFile, index: usize) -> Decoded {
     let caps_data = file.floats(m.caps.offset, m.caps.length);
     let key = |d: &[f32], i: usize| bits([d[4 * i], d[4 * i + 1], d[4 * i + 2]]);
     // The caps, first in first-occurrence numbers, renumbered in place.
-    let mut caps = vec![[0u32; 3]; caps_data.len() / 12];
+    // The floats once as a slice: through `Floats` (an enum), every key
+    // paid for the dereference.
+    let caps_flat: &[f32] = &caps_data;
+    let mut caps = vec![[0u32; 3]; caps_flat.len() / 12];
     let (mut table, distinct) =
-        PositionTable::number(|i| key(&caps_data, i), bytemuck::cast_slice_mut(&mut caps));
+        PositionTable::number(|i| key(caps_flat, i), bytemuck::cast_slice_mut(&mut caps));
     // Distinct bits have distinct order keys: the order is total. Sorted as
     // words of the three keys above the position's number, by the weld's
     // radix sort: a comparison sort of the numbers by their keys took 45–48
@@ -168,20 +171,34 @@ fn decode_steps(file: &SvpkFile, index: usize) -> Decoded {
         .map(|b| {
             let k = b.k as usize;
             let data = file.floats(b.offset, b.length);
-            let ids = table.ids(data.len() / 4, |i| key(&data, i));
-            // Per slot, in order (rayon's collect keeps it).
-            let (slot_tri, slot_parity): (Vec<u32>, Vec<i8>) = ids
-                .par_chunks_exact(2 + k)
-                .flat_map_iter(|r| {
-                    r[2..].iter().map(|&o| {
-                        let (key, p) = sort_ids([r[0], r[1], o]);
-                        match by_corners.get(key) {
-                            Some((t, q)) => (t, p * q),
-                            None => (UNKNOWN, 0),
+            let flat: &[f32] = &data;
+            let ids = table.ids(flat.len() / 4, |i| key(flat, i));
+            // Per slot, written in place by blocks of records (an unzip of
+            // a flattened iterator collected each thread's part in lists
+            // first and copied them after).
+            let records = ids.len() / (2 + k);
+            let mut slot_tri = vec![0u32; records * k];
+            let mut slot_parity = vec![0i8; records * k];
+            if k > 0 {
+                slot_tri
+                    .par_chunks_mut(STRUCTURE_BLOCK * k)
+                    .zip(slot_parity.par_chunks_mut(STRUCTURE_BLOCK * k))
+                    .zip(ids.par_chunks(STRUCTURE_BLOCK * (2 + k)))
+                    .for_each(|((tri, parity), ids)| {
+                        let slots = ids.chunks_exact(2 + k).flat_map(|r| {
+                            r[2..].iter().map(|&o| {
+                                let (key, p) = sort_ids([r[0], r[1], o]);
+                                match by_corners.get(key) {
+                                    Some((t, q)) => (t, p * q),
+                                    None => (UNKNOWN, 0),
+                                }
+                            })
+                        });
+                        for ((t, q), s) in tri.iter_mut().zip(parity.iter_mut()).zip(slots) {
+                            (*t, *q) = s;
                         }
-                    })
-                })
-                .unzip();
+                    });
+            }
             DecodedBucket {
                 k,
                 data,
