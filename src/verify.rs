@@ -278,6 +278,16 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
     let mut edge_rest = &mut edges[..];
     // The bijection's sides (see below): regular slots counted per caps
     // corner set and edge, the others listed.
+    //
+    // The counts are kept by the corner set's evaluation number where the
+    // decode made one ([`OrderedEvaluation::rank`]): in the order the
+    // records first name the caps, so each record's counts lie near the
+    // last record's. By triangle number they were anywhere in the dragon's
+    // 10 MB of counts, and the records' pass took 50.4–55.9 ms instead of
+    // 44.7–49.1 (one thread, local timers, benches/ROUNDS.md, Forty-third
+    // round).
+    let ranked = d.ordered.as_ref().map(|o| (o.rank(), o.order()));
+    let slot_of = |t: u32| ranked.map_or(t, |(rank, _)| rank[t as usize]) as usize;
     let slot_counts: Vec<AtomicU32> = (0..3 * d.caps.len()).map(|_| AtomicU32::new(0)).collect();
     let mut odd_sides: Vec<[u32; 3]> = Vec::new();
     let mut first_record = 0;
@@ -322,7 +332,7 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
                                 // Which edge of the corner set: o is its
                                 // smallest, middle or largest corner.
                                 let e = usize::from(o > a) + usize::from(o > bb);
-                                slot_counts[3 * t as usize + e].fetch_add(1, Relaxed);
+                                slot_counts[3 * slot_of(t) + e].fetch_add(1, Relaxed);
                             } else {
                                 odd.push([a, bb, o]);
                             }
@@ -399,7 +409,7 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
     let mut odd_caps: Vec<[u32; 3]> = Vec::new();
     for (t, &first) in d.caps.iter().zip(&d.cap_first) {
         if first != UNKNOWN {
-            class_size[first as usize] += 1;
+            class_size[slot_of(first)] += 1;
         } else {
             odd_caps.extend((0..3).map(|e| {
                 let (p, q, o) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
@@ -414,11 +424,12 @@ pub fn check_structure(d: &Decoded) -> StructureReport {
             first = Some((triple, side));
         }
     };
-    for (t, &size) in class_size.iter().enumerate().filter(|c| *c.1 > 0) {
-        let (k, _) = crate::evaluate_indexed::sort_ids(d.caps[t]);
+    for (i, &size) in class_size.iter().enumerate().filter(|c| *c.1 > 0) {
         for e in 0..3 {
-            let count = slot_counts[3 * t + e].load(Relaxed);
+            let count = slot_counts[3 * i + e].load(Relaxed);
             if count != size {
+                let t = ranked.map_or(i, |(_, order)| order[i] as usize);
+                let (k, _) = crate::evaluate_indexed::sort_ids(d.caps[t]);
                 rep.bijection_errors += u64::from(count.abs_diff(size));
                 // The edge opposite corner e, ends in order.
                 let ends: Vec<u32> = (0..3).filter(|&i| i != e).map(|i| k[i]).collect();
