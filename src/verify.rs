@@ -935,18 +935,42 @@ impl ClosednessIndex {
         // Each entry: the larger id above, the entry of `pair_entries`
         // below. A cap's sign is its edges' weight along its winding, a
         // record's m is minus its A → B weight (`side_corner`).
+        //
+        // The caps are taken in evaluation order, which follows the pairs'
+        // order: in input order each cap's entries went anywhere in the
+        // dragon's 31 MB of entries, and this pass took 28.4–29.9 ms
+        // instead of 24.9–27.9, the lists' pass below 35.7–38.1 instead of
+        // 31.7–33.6 (one thread, local timers, benches/ROUNDS.md,
+        // Forty-third round). Each list is sorted below, so the order of
+        // this pass does not change the index.
         let caps = d.caps.len() as u32;
-        let rank = d.ordered.as_ref().expect("usable").rank();
+        let order = d.ordered.as_ref().expect("usable").order();
         let mut entries = vec![0u64; start[d.positions.len()] as usize];
-        for_each_drawn_pair(d, |x, y, o| {
+        let mut put = |x: u32, y: u32, o: u32| {
             if x != y {
                 let at = &mut start[x.min(y) as usize];
                 *at -= 1;
                 let negate = if (x > y) != (o >= caps) { NEGATE } else { 0 };
-                let o = if o < caps { rank[o as usize] } else { o };
                 entries[*at as usize] = ((x.max(y) as u64) << 32) | (o | negate) as u64;
             }
-        });
+        };
+        for (r, &t) in order.iter().enumerate() {
+            if let Some(&ahead) = order.get(r + 16) {
+                crate::hint::prefetch(&d.caps[ahead as usize]);
+            }
+            let c = d.caps[t as usize];
+            let r = r as u32;
+            put(c[0], c[1], r);
+            put(c[1], c[2], r);
+            put(c[2], c[0], r);
+        }
+        let mut o = caps;
+        for b in &d.buckets {
+            for ids in b.ids.chunks_exact(2 + b.k) {
+                put(ids[0], ids[1], o);
+                o += 1;
+            }
+        }
         // Reserved for every entry in either form (pages never written are
         // never touched), so that none of them moves as it grows.
         let mut index = ClosednessIndex {
