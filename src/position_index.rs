@@ -54,11 +54,19 @@ impl PositionTable {
 
     /// Home slot of `k`: a multiplicative hash of all 96 bits, whose top
     /// bits are well mixed (mesh coordinates share most of their bits).
+    /// Each coordinate is multiplied on its own: with the first two joined
+    /// into one 64-bit word, the key went through the stack and the CPU
+    /// could not forward that word's load from the two 4-byte stores (a
+    /// quarter of the numbering's samples, `perf annotate`), and the
+    /// dragon's numbering took 54.7–73.1 ms instead of 37.5–38.4 (one
+    /// thread, local timers, benches/ROUNDS.md, Forty-third round).
     #[inline(always)]
     fn home(&self, k: Key) -> usize {
-        let h = (u64::from(k[0]) | u64::from(k[1]) << 32).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        let h = (h ^ u64::from(k[2])).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-        ((h ^ (h >> 29)) >> self.shift) as usize
+        let h = u64::from(k[0]).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ u64::from(k[1]).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            ^ u64::from(k[2]).wrapping_mul(0x1656_67B1_9E37_79F9);
+        let h = (h ^ (h >> 29)).wrapping_mul(0xD6E8_FEB8_6659_FD93);
+        (h >> self.shift) as usize
     }
 
     /// Prefetches the home slot of `k`.
