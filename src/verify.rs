@@ -922,7 +922,7 @@ impl ClosednessIndex {
         // to the range's start. Collapsed edges (one position) are left
         // out.
         let mut start = vec![0u32; d.positions.len() + 1];
-        for_each_drawn_pair(d, |x, y, _| {
+        for_each_drawn_pair(d, d.caps.iter().copied(), |x, y, _| {
             if x != y {
                 start[x.min(y) as usize] += 1;
             }
@@ -945,32 +945,22 @@ impl ClosednessIndex {
         // this pass does not change the index.
         let caps = d.caps.len() as u32;
         let order = d.ordered.as_ref().expect("usable").order();
+        let in_order = order.iter().enumerate().map(|(r, &t)| {
+            // Input order is far from this one.
+            if let Some(&ahead) = order.get(r + 16) {
+                crate::hint::prefetch(&d.caps[ahead as usize]);
+            }
+            d.caps[t as usize]
+        });
         let mut entries = vec![0u64; start[d.positions.len()] as usize];
-        let mut put = |x: u32, y: u32, o: u32| {
+        for_each_drawn_pair(d, in_order, |x, y, o| {
             if x != y {
                 let at = &mut start[x.min(y) as usize];
                 *at -= 1;
                 let negate = if (x > y) != (o >= caps) { NEGATE } else { 0 };
                 entries[*at as usize] = ((x.max(y) as u64) << 32) | (o | negate) as u64;
             }
-        };
-        for (r, &t) in order.iter().enumerate() {
-            if let Some(&ahead) = order.get(r + 16) {
-                crate::hint::prefetch(&d.caps[ahead as usize]);
-            }
-            let c = d.caps[t as usize];
-            let r = r as u32;
-            put(c[0], c[1], r);
-            put(c[1], c[2], r);
-            put(c[2], c[0], r);
-        }
-        let mut o = caps;
-        for b in &d.buckets {
-            for ids in b.ids.chunks_exact(2 + b.k) {
-                put(ids[0], ids[1], o);
-                o += 1;
-            }
-        }
+        });
         // Reserved for every entry in either form (pages never written are
         // never touched), so that none of them moves as it grows.
         let mut index = ClosednessIndex {
@@ -1005,13 +995,18 @@ impl ClosednessIndex {
     }
 }
 
-/// Calls `f(x, y, sign index)` for every pair a light may draw: each caps
-/// triangle `t`'s edges (corner e to corner e + 1, sign index `t`), then
-/// each record's (A, B), its sign index counting on from the caps'.
+/// Calls `f(x, y, sign index)` for every pair a light may draw: the edges
+/// (corner e to corner e + 1) of each caps triangle `caps` yields (every
+/// triangle once), the sign index counting them, then each record's
+/// (A, B), its sign index counting on from the caps'.
 #[inline(always)]
-fn for_each_drawn_pair(d: &Decoded, mut f: impl FnMut(u32, u32, u32)) {
+fn for_each_drawn_pair(
+    d: &Decoded,
+    caps: impl Iterator<Item = [u32; 3]>,
+    mut f: impl FnMut(u32, u32, u32),
+) {
     let mut o = 0u32;
-    for c in &d.caps {
+    for c in caps {
         f(c[0], c[1], o);
         f(c[1], c[2], o);
         f(c[2], c[0], o);
