@@ -186,6 +186,39 @@ impl IndexedCaps {
         ([corner(a), corner(b), corner(c)], self.odd[t])
     }
 
+    /// Whether triangle `t`'s sorted corners ([`IndexedCaps::sorted_corners`])
+    /// are an odd permutation of its stored ones.
+    #[inline(always)]
+    pub fn odd(&self, t: usize) -> bool {
+        self.odd[t]
+    }
+
+    /// The sorted corners of the [`LANES`] triangles from `first` into
+    /// lanes: `dst[c][a][i]` is coordinate `a` of sorted corner `c` of
+    /// triangle `first + i`, the floats [`IndexedCaps::sorted_corners`]
+    /// gives. With `AVX2` each row is loaded whole and the rows transposed
+    /// in registers: `verify`'s orientation check filters a block at a
+    /// time in vectors, and element-by-element copies into the lanes went
+    /// through the stack and were read back by wider loads, which the CPU
+    /// cannot forward.
+    ///
+    /// # Safety
+    /// With `AVX2`, the CPU must have AVX2 (the caller is compiled with
+    /// it). Panics when the block passes the last triangle.
+    #[inline(always)]
+    pub(crate) unsafe fn sorted_corner_lanes<const AVX2: bool>(
+        &self,
+        first: usize,
+        dst: &mut [Corner; 3],
+    ) {
+        let t = &self.sorted[first..first + LANES];
+        for (c, d) in dst.iter_mut().enumerate() {
+            // SAFETY: every stored corner names a row of `points` (`new`);
+            // AVX2 is the caller's.
+            unsafe { gather::<AVX2>(&self.points, t, c, d) };
+        }
+    }
+
     /// Reference orientation of every triangle for light `l`: `out[t]` is
     /// `tri_sign` of triangle `t`'s corners in their stored order, bit for
     /// bit what [`crate::evaluate_simd::cap_signs`] computes from the

@@ -17,6 +17,7 @@
 use crate::evaluate::{Strategy, cap_signs_with, side_multiplicities_with};
 use crate::evaluate_indexed::LIGHT_GROUP;
 use crate::evaluate_ordered::{GroupScratch, OrderedEvaluation};
+use crate::evaluate_simd::{Corner, LANES};
 use crate::format::{Floats, SvpkFile};
 use crate::multiplicity::{Light, cap_corner, side_corner, to_infinity};
 use crate::position_index::{PositionTable, TriangleIndex};
@@ -1503,23 +1504,17 @@ pub struct LightReport {
 pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
     let l = light.map(|v| v as f64);
     if let Some(o) = &d.ordered {
-        let caps = o.caps();
-        let order = o.order();
-        return order
-            .iter()
-            .enumerate()
-            .filter(|&(r, &t)| {
-                // The sign of the triangle 32 on: input order is far
-                // from this order.
-                if let Some(&u) = order.get(r + 32) {
-                    crate::hint::prefetch(&ev.caps[u as usize]);
-                }
-                let (p, odd) = caps.sorted_corners(r);
-                let exact = exact_orientation(p, l);
-                let exact = if odd { -exact } else { exact };
-                exact != ev.caps[t as usize] as i32
-            })
-            .count() as u64;
+        // Whole blocks in lanes for a light with `w` 0 or 1 (every light
+        // `verify` makes), the rest one at a time.
+        let whole = o.order().len() / LANES * LANES;
+        let (blocks, rest) = if l[3] == 1.0 {
+            (orientation_blocks::<true>(o, l, ev), whole)
+        } else if l[3] == 0.0 {
+            (orientation_blocks::<false>(o, l, ev), whole)
+        } else {
+            (0, 0)
+        };
+        return blocks + ordered_orientation_errors(o, l, ev, rest);
     }
     // The corners of the triangle AHEAD on are prefetched: the caps are in
     // input order, scattered over a position table larger than L2.
@@ -1540,6 +1535,127 @@ pub fn orientation_errors(d: &Decoded, light: Light, ev: &Evaluation) -> u64 {
             exact_orientation(t.map(|i| &d.positions[i as usize]), l) != **c as i32
         })
         .count() as u64
+}
+
+/// The orientation errors of the ordered caps from evaluation number
+/// `first` on, one triangle at a time.
+fn ordered_orientation_errors(
+    o: &OrderedEvaluation,
+    l: [f64; 4],
+    ev: &Evaluation,
+    first: usize,
+) -> u64 {
+    let caps = o.caps();
+    let order = o.order();
+    (first..order.len())
+        .filter(|&r| {
+            // The sign of the triangle 32 on: input order is far from this
+            // order.
+            if let Some(&u) = order.get(r + 32) {
+                crate::hint::prefetch(&ev.caps[u as usize]);
+            }
+            let (p, odd) = caps.sorted_corners(r);
+            let exact = exact_orientation(p, l);
+            let exact = if odd { -exact } else { exact };
+            exact != ev.caps[order[r] as usize] as i32
+        })
+        .count() as u64
+}
+
+/// The orientation errors of the ordered caps in whole blocks of
+/// [`LANES`] (those before `order().len() / LANES * LANES`), for a point
+/// light (`POINT`, `l[3] == 1`) or a directional one (`l[3] == 0`): each
+/// block's corners gathered into lanes, filtered in vectors
+/// ([`filtered_lanes`]), and only the undecided lanes through
+/// [`exact_orientation`]. Scalar, the filter took 86–90 of `verify`'s
+/// 870 ms on the dragon (one thread, local timers, benches/ROUNDS.md,
+/// Forty-fourth round).
+fn orientation_blocks<const POINT: bool>(
+    o: &OrderedEvaluation,
+    l: [f64; 4],
+    ev: &Evaluation,
+) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    if crate::evaluate_simd::have_avx2() {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { orientation_blocks_avx2::<POINT>(o, l, ev) };
+    }
+    // SAFETY: without AVX2 the corners are copied element by element.
+    unsafe { orientation_blocks_impl::<false, POINT>(o, l, ev) }
+}
+
+/// [`orientation_blocks_impl`] compiled with AVX2.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn orientation_blocks_avx2<const POINT: bool>(
+    o: &OrderedEvaluation,
+    l: [f64; 4],
+    ev: &Evaluation,
+) -> u64 {
+    // SAFETY: the caller's.
+    unsafe { orientation_blocks_impl::<true, POINT>(o, l, ev) }
+}
+
+/// The loop of [`orientation_blocks`].
+///
+/// # Safety
+/// With `AVX2`, the CPU must have AVX2.
+#[inline(always)]
+unsafe fn orientation_blocks_impl<const AVX2: bool, const POINT: bool>(
+    o: &OrderedEvaluation,
+    l: [f64; 4],
+    ev: &Evaluation,
+) -> u64 {
+    let caps = o.caps();
+    let order = o.order();
+    let mut errors = 0;
+    let mut p = [[[0f32; LANES]; 3]; 3];
+    for first in (0..order.len() / LANES).map(|b| b * LANES) {
+        // SAFETY: the caller's.
+        unsafe { caps.sorted_corner_lanes::<AVX2>(first, &mut p) };
+        let fast = filtered_lanes::<POINT>(&p, l);
+        for (r, s) in (first..).zip(fast) {
+            // The sign of the triangle 32 on: input order is far from this
+            // order.
+            if let Some(&u) = order.get(r + 32) {
+                crate::hint::prefetch(&ev.caps[u as usize]);
+            }
+            let s = if s != 0 {
+                s
+            } else {
+                exact_orientation(caps.sorted_corners(r).0, l)
+            };
+            let s = if caps.odd(r) { -s } else { s };
+            errors += u64::from(s != ev.caps[order[r] as usize] as i32);
+        }
+    }
+    errors
+}
+
+/// [`exact_orientation`]'s f64 filter on [`LANES`] triangles given as
+/// lanes of their corners (`p[c][a][i]`), for a point light (`POINT`) or a
+/// directional one: per lane its answer, or 0 when the filter cannot tell.
+/// A fixed-count loop over a straight-line body, which LLVM vectorises;
+/// every lane evaluates the same expression as the scalar filter.
+#[inline(always)]
+fn filtered_lanes<const POINT: bool>(p: &[Corner; 3], l: [f64; 4]) -> [i32; LANES] {
+    let l3 = [l[0], l[1], l[2]];
+    let mut out = [0; LANES];
+    for (i, o) in out.iter_mut().enumerate() {
+        let c = |q: &Corner| [q[0][i] as f64, q[1][i] as f64, q[2][i] as f64];
+        let t3 = [c(&p[0]), c(&p[1]), c(&p[2])];
+        let fast = if POINT {
+            crate::exact::orient3d_filtered(t3, l3)
+        } else {
+            crate::exact::directional_filtered(t3, l3)
+        };
+        // The sign of det[P0; P1; P2; L] negated, as `exact_orientation`.
+        *o = -fast.unwrap_or(0);
+    }
+    out
 }
 
 /// The exact sign of `det[P0; P1; P2; L]` negated (the contract's cap
@@ -1864,4 +1980,81 @@ pub fn parse_light(s: &str) -> Result<Light, String> {
     }
     // -0.0 and +0.0 are the same light; keep the file's convention.
     Ok(l.map(|v| if v == 0.0 { 0.0 } else { v }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The orientation check's blocks give the counts of the one-at-a-time
+    /// loop with either copy of the corners into lanes (the element-by-element
+    /// one, which this CPU would not otherwise run, and the AVX2 one), on
+    /// the hard cases under their own lights (on and next to triangle
+    /// planes, where the filter cannot tell) and with signs flipped or
+    /// zeroed. Caught: an exact answer left out for the undecided lanes.
+    #[test]
+    fn orientation_blocks_count_what_the_scalar_loop_counts() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (input, output) = (tmp.path().join("m.obj"), tmp.path().join("m.svpk"));
+        let (mut checked, mut errors, mut undecided) = (0, 0, 0);
+        for case in crate::hardcases::cases() {
+            std::fs::write(&input, crate::hardcases::obj(&case.v, &case.f)).unwrap();
+            crate::build::build_file(&input, &output, &Default::default()).unwrap();
+            let d = decode(&crate::format::read_file(&output).unwrap(), 0);
+            let Some(o) = &d.ordered else { continue };
+            let finite = d.positions.iter().flatten().all(|v| v.is_finite());
+            if !finite || o.order().len() < LANES {
+                continue;
+            }
+            let whole = o.order().len() / LANES * LANES;
+            for (n, &light) in case.lights.iter().enumerate() {
+                let l = light.map(|v| v as f64);
+                let mut ev = evaluate(&d, light, Strategy::Reference);
+                for (i, c) in ev.caps.iter_mut().enumerate() {
+                    match (i * 7 + n) % 13 {
+                        0 => *c = -*c,
+                        1 => *c = 0,
+                        _ => {}
+                    }
+                }
+                let want = ordered_orientation_errors(o, l, &ev, 0);
+                let rest = ordered_orientation_errors(o, l, &ev, whole);
+                let caps = o.caps();
+                // SAFETY: without AVX2 the copy is element by element.
+                let (plain, undecided_here) = if l[3] == 1.0 {
+                    let p = unsafe { orientation_blocks_impl::<false, true>(o, l, &ev) };
+                    (p, count_undecided::<true>(caps, whole, l))
+                } else {
+                    let p = unsafe { orientation_blocks_impl::<false, false>(o, l, &ev) };
+                    (p, count_undecided::<false>(caps, whole, l))
+                };
+                assert_eq!(plain + rest, want, "{} light {n}", case.name);
+                assert_eq!(orientation_errors(&d, light, &ev), want, "{}", case.name);
+                checked += whole;
+                errors += want;
+                undecided += undecided_here;
+            }
+        }
+        assert!(checked > 1000 && errors > 100, "{checked} {errors}");
+        assert!(undecided > 10, "{undecided}");
+    }
+
+    /// Lanes the filter leaves undecided in the first `whole` caps.
+    fn count_undecided<const POINT: bool>(
+        caps: &crate::evaluate_indexed::IndexedCaps,
+        whole: usize,
+        l: [f64; 4],
+    ) -> usize {
+        let mut p = [[[0f32; LANES]; 3]; 3];
+        (0..whole / LANES)
+            .map(|b| {
+                // SAFETY: without AVX2 the copy is element by element.
+                unsafe { caps.sorted_corner_lanes::<false>(b * LANES, &mut p) };
+                filtered_lanes::<POINT>(&p, l)
+                    .iter()
+                    .filter(|&&s| s == 0)
+                    .count()
+            })
+            .sum()
+    }
 }
