@@ -52,7 +52,6 @@ fn hom(p: [f32; 4]) -> H {
 /// Bounding-volume hierarchy over triangles given as corner positions, in
 /// the order of its leaves (see [`ShadowIndex::new`]).
 struct Bvh {
-    /// Per node: min xyz, max xyz.
     /// Per node: its box, `[min x, min y, min z, max x, max y, max z]`, in
     /// f32 as the corners are (exact; half the memory of f64 boxes).
     boxes: Vec<[f32; 6]>,
