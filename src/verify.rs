@@ -921,7 +921,7 @@ pub struct ClosednessIndex {
     ///
     /// Only the pairs with other than three entries are listed here; their
     /// numbers are in `other_pairs`. The pairs with three (on a closed
-    /// mesh, every pair: two caps and a record) are in `triples`.
+    /// mesh, every pair: two caps and a record) are in the triples.
     pair_entries: Vec<u32>,
     /// The numbers of the pairs in `pair_entries`, ascending.
     other_pairs: Vec<u32>,
@@ -932,8 +932,14 @@ pub struct ClosednessIndex {
     /// for a sum other than zero at once: the dragon's sums took 47.9–49.3
     /// ms of its 16 lights instead of 63.2–64.3 (one thread, local timers,
     /// benches/ROUNDS.md, Forty-third round).
-    triples: Vec<[u32; 3]>,
-    /// `(first pair, count)` of each run of `triples`, in order.
+    ///
+    /// Stored as the first `3 · triple_count` `u32`s of `triple_words`
+    /// ([`ClosednessIndex::triples`]), the vector the entries were sorted
+    /// in (see [`ClosednessIndex::new`]).
+    triple_words: Vec<u64>,
+    /// Number of triples.
+    triple_count: usize,
+    /// `(first pair, count)` of each run of triples, in order.
     triple_runs: Vec<(u32, u32)>,
     /// Each pair's ids as `(smaller << 32) | larger`, ascending: pair `n`'s
     /// key is `pair_keys[n]`.
@@ -1021,32 +1027,51 @@ impl ClosednessIndex {
         // never touched), so that none of them moves as it grows.
         let mut index = ClosednessIndex {
             pair_entries: Vec::with_capacity(entries.len()),
-            triples: Vec::with_capacity(entries.len() / 3),
             pair_keys: Vec::with_capacity(entries.len()),
             usable: true,
             ..Default::default()
         };
+        // The triples are written over the entries already read, as `u32`s:
+        // each reads three entries and writes half their bytes, so `at`,
+        // the `u32`s written, never passes `i`, the entries read, and the
+        // entries not yet read are never written. In a vector of their own
+        // they were fresh memory, a third of the entries' (the 5M scene's
+        // 90 MB), faulted in a page at a time.
+        let mut at = 0;
         for (smaller, range) in start.windows(2).enumerate() {
-            let list = &mut entries[range[0] as usize..range[1] as usize];
-            list.sort_unstable();
-            for run in list.chunk_by(|a, b| a >> 32 == b >> 32) {
+            let (first, end) = (range[0] as usize, range[1] as usize);
+            entries[first..end].sort_unstable();
+            let mut i = first;
+            while i < end {
+                let larger = entries[i] >> 32;
+                let run = entries[i..end]
+                    .iter()
+                    .take_while(|&&e| e >> 32 == larger)
+                    .count();
                 let n = index.pair_keys.len() as u32;
-                index
-                    .pair_keys
-                    .push(((smaller as u64) << 32) | run[0] >> 32);
-                if let &[a, b, c] = run {
-                    index.triples.push([a as u32, b as u32, c as u32]);
+                index.pair_keys.push(((smaller as u64) << 32) | larger);
+                if run == 3 {
+                    let t = [entries[i], entries[i + 1], entries[i + 2]].map(|e| e as u32);
+                    bytemuck::cast_slice_mut::<u64, u32>(&mut entries)[at..at + 3]
+                        .copy_from_slice(&t);
+                    at += 3;
                     match index.triple_runs.last_mut() {
                         Some((first, count)) if *first + *count == n => *count += 1,
                         _ => index.triple_runs.push((n, 1)),
                     }
                 } else {
                     index.other_pairs.push(n);
-                    index.pair_entries.extend(run.iter().map(|&e| e as u32));
+                    let pair = &entries[i..i + run];
+                    index.pair_entries.extend(pair.iter().map(|&e| e as u32));
                     *index.pair_entries.last_mut().expect("a run has entries") |= LAST;
                 }
+                i += run;
             }
         }
+        entries.truncate(at.div_ceil(2));
+        entries.shrink_to_fit();
+        index.triple_words = entries;
+        index.triple_count = at / 3;
         index
     }
 }
@@ -1077,6 +1102,12 @@ fn for_each_drawn_pair(
 }
 
 impl ClosednessIndex {
+    /// The entries of the pairs with three, pair after pair.
+    fn triples(&self) -> &[[u32; 3]] {
+        let words: &[u32] = bytemuck::cast_slice(&self.triple_words);
+        words[..3 * self.triple_count].as_chunks().0
+    }
+
     /// Calls `f` with the number and signed weight of each pair whose
     /// weight is not 0: the sum of the signs its entries index, negated
     /// where they say so. Integer sums, so the order of the additions does
@@ -1090,7 +1121,7 @@ impl ClosednessIndex {
             (v ^ negate) - negate
         };
         let sum3 = |t: &[u32; 3]| weight(t[0]) + weight(t[1]) + weight(t[2]);
-        let mut triples = &self.triples[..];
+        let mut triples = self.triples();
         for &(first, count) in &self.triple_runs {
             let (run, rest) = triples.split_at(count as usize);
             triples = rest;
