@@ -21,6 +21,10 @@ pub(crate) const NONE: u32 = u32::MAX;
 /// How many keys ahead the loops prefetch a slot.
 const AHEAD: usize = 16;
 
+/// Longest list of a smallest corner that [`TriangleIndex::first_copies`]
+/// searches as it is; longer ones are sorted first.
+const SHORT_LIST: usize = 16;
+
 /// Keys per parallel block of [`PositionTable::ids`]; fixed, so the result
 /// does not depend on the number of threads.
 const BLOCK: usize = 1 << 14;
@@ -209,6 +213,43 @@ impl TriangleIndex {
         TriangleIndex { start, entries }
     }
 
+    /// Per caps triangle (`n` of them, as given to [`TriangleIndex::new`]):
+    /// the first triangle with the same sorted corner ids, which
+    /// [`TriangleIndex::get`] of them answers, or [`NONE`] for one not
+    /// listed (its corners not three distinct known ids). One pass over the
+    /// lists in order: `get` per triangle in caps order read a list
+    /// anywhere, and the index and those lookups took 41.8–43.5 ms of the
+    /// dragon's decode, against 23.2–25.0 for the index and this (one
+    /// thread, local timers, three alternated runs, benches/ROUNDS.md,
+    /// Forty-fourth round). A list longer than [`SHORT_LIST`] is sorted by
+    /// corners first, so a vertex that is the smallest corner of many
+    /// triangles (a fan in a damaged file) does not take time quadratic in
+    /// them.
+    pub(crate) fn first_copies(&self, n: usize) -> Vec<u32> {
+        let mut first = vec![NONE; n];
+        let mut long = Vec::new();
+        for w in self.start.windows(2) {
+            let list = &self.entries[w[0] as usize..w[1] as usize];
+            if list.len() <= SHORT_LIST {
+                for (i, e) in list.iter().enumerate() {
+                    let f = list[..i].iter().find(|f| f[..2] == e[..2]).unwrap_or(e);
+                    first[e[2] as usize] = f[2];
+                }
+            } else {
+                // The list's triangles by corners, then by number.
+                long.clear();
+                long.extend(list.iter().map(|e| [e[0], e[1], e[2]]));
+                long.sort_unstable();
+                for same in long.chunk_by(|a, b| a[..2] == b[..2]) {
+                    for e in same {
+                        first[e[2] as usize] = same[0][2];
+                    }
+                }
+            }
+        }
+        first
+    }
+
     /// The first triangle (in caps order) whose sorted corner ids are `k`,
     /// with the parity of its corners' sort (+1 even, −1 odd).
     #[inline]
@@ -285,6 +326,26 @@ mod tests {
         }
     }
 
+    /// The first 3,000 of `caps` with the ids of triangle `t` moved up by
+    /// `40 · (t % 75)`, then the first 1,000 of those again: the same
+    /// triangles repeat, but the lists of 3,000 positions are short.
+    fn spread(caps: &[[u32; 3]]) -> Vec<[u32; 3]> {
+        let moved: Vec<[u32; 3]> = caps[..3000]
+            .iter()
+            .enumerate()
+            .map(|(t, c)| {
+                c.map(|i| {
+                    if i == NONE {
+                        NONE
+                    } else {
+                        i + 40 * (t as u32 % 75)
+                    }
+                })
+            })
+            .collect();
+        [&moved[..], &moved[..1000]].concat()
+    }
+
     #[test]
     fn triangle_index_finds_the_first_triangle_with_the_corners() {
         let mut bits = crate::multiplicity::test_bits(0xabcdef);
@@ -320,5 +381,29 @@ mod tests {
         }
         assert!(found > 1000, "{found}");
         assert!(map.values().any(|v| v.1 == -1) && map.values().any(|v| v.1 == 1));
+        // Each triangle's first copy, as `get` finds it: with 40 positions
+        // the lists are long (sorted first), with 4,000 short.
+        for (n, caps) in [(n, caps.clone()), (3000, spread(&caps))] {
+            let index = TriangleIndex::new(&caps, n as usize);
+            let first = index.first_copies(caps.len());
+            let (mut copies, mut long, mut short) = (0, 0, 0);
+            for (t, c) in caps.iter().enumerate() {
+                let (k, _) = crate::evaluate_indexed::sort_ids(*c);
+                let want = index.get(k).map_or(NONE, |f| f.0);
+                assert_eq!(first[t], want, "triangle {t} of {}", caps.len());
+                copies += usize::from(want != NONE && want != t as u32);
+            }
+            for w in index.start.windows(2) {
+                let len = (w[1] - w[0]) as usize;
+                long += usize::from(len > SHORT_LIST);
+                short += usize::from((2..=SHORT_LIST).contains(&len));
+            }
+            assert!(copies > 100, "{copies}");
+            if n == 40 {
+                assert!(long > 10, "{long}");
+            } else {
+                assert!(short > 500 && long < 10, "{short} {long}");
+            }
+        }
     }
 }

@@ -162,10 +162,9 @@ fn decode_steps(file: &SvpkFile, index: usize) -> Decoded {
     // Each triangle once, by its sorted corner ids, with the parity of the
     // sort (duplicates of a corner set: any of them gives the same sign).
     let by_corners = TriangleIndex::new(&caps, positions.len());
-    let cap_first: Vec<u32> = caps
-        .par_iter()
-        .map(|c| by_corners.get(sort_ids(*c).0).map_or(UNKNOWN, |f| f.0))
-        .collect();
+    // (The index's `NONE` is `UNKNOWN`.)
+    const { assert!(UNKNOWN == crate::position_index::NONE) };
+    let cap_first = by_corners.first_copies(caps.len());
     let buckets: Vec<DecodedBucket> = m
         .buckets
         .iter()
