@@ -382,7 +382,7 @@ mod tests {
         assert!(found > 1000, "{found}");
         assert!(map.values().any(|v| v.1 == -1) && map.values().any(|v| v.1 == 1));
         // Each triangle's first copy, as `get` finds it: with 40 positions
-        // the lists are long (sorted first), with 4,000 short.
+        // the lists are long (sorted first), with 3,000 short.
         for (n, caps) in [(n, caps.clone()), (3000, spread(&caps))] {
             let index = TriangleIndex::new(&caps, n as usize);
             let first = index.first_copies(caps.len());

@@ -55,8 +55,10 @@ fn hom(p: [f32; 4]) -> H {
 /// `verify` peaked at 1666–1672 MiB instead of 1721–1729 and built its
 /// index in 526–684 ms instead of 602–780, with the shadow check's queries
 /// no slower (443–485 against 477–510 ms for 16 lights; one thread, three
-/// alternated runs, local timers). 16 saved 30 MiB more, but a query then
-/// tests up to 16 triangles where one box test could skip half.
+/// alternated runs, local timers; on the dragon, four alternations,
+/// 141.6–150.0 ms against 143.7–166.1). 16 saved 30 MiB more, with
+/// queries the timers could not tell from 8's; 8 is the smaller change
+/// to a query's work.
 const LEAF: usize = 8;
 
 /// Bounding-volume hierarchy over triangles given as corner positions, in

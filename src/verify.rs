@@ -237,8 +237,9 @@ fn decode_steps(file: &SvpkFile, index: usize) -> Decoded {
 /// in edge order from the build, so its list of them is a few ascending
 /// runs, one per bucket, and a file with open or non-manifold edges has
 /// several buckets. Sorted whole, the 5M scene's 7.5M records (five runs)
-/// took 216 ms with one thread, the dragon's 1.3M (one run) 1 ms (local
-/// timers, benches/ROUNDS.md, Forty-fourth round).
+/// took 216 ms with one thread, this way 45.5–49.7 ms; the dragon's 1.3M
+/// (one run) 1.0 and 1.5 ms (local timers, benches/ROUNDS.md, Forty-fourth
+/// round).
 fn sort_few_runs<T: Ord + Copy + Send>(v: &mut [T]) {
     // The longest run, `v[run.0..run.1]`.
     let (mut run, mut start) = ((0, 0), 0);
@@ -1652,9 +1653,9 @@ fn ordered_orientation_errors(
 /// light (`POINT`, `l[3] == 1`) or a directional one (`l[3] == 0`): each
 /// block's corners gathered into lanes, filtered in vectors
 /// ([`filtered_lanes`]), and only the undecided lanes through
-/// [`exact_orientation`]. Scalar, the filter took 86–90 of `verify`'s
-/// 870 ms on the dragon (one thread, local timers, benches/ROUNDS.md,
-/// Forty-fourth round).
+/// [`exact_orientation`]. One triangle at a time, the dragon's 16 lights
+/// took 83.9–84.7 ms here, in blocks 69.2–71.5 (one thread, local timers,
+/// benches/ROUNDS.md, Forty-fourth round).
 fn orientation_blocks<const POINT: bool>(
     o: &OrderedEvaluation,
     l: [f64; 4],
@@ -2124,11 +2125,12 @@ mod tests {
         assert!(undecided > 10, "{undecided}");
     }
 
-    /// `sort_few_runs` sorts as a sort does: lists of one to nine
-    /// ascending runs of any lengths (some empty, some of one item, the
-    /// longest anywhere), runs of equal items, and lists in random order.
-    /// Caught: the run's items moved one place short, and a search that
-    /// skipped the run's first item.
+    /// `sort_few_runs` sorts as a sort does: lists of one to nine runs
+    /// ascending in their first field, of any lengths (some empty, some of
+    /// one item, the longest anywhere), some with many equal first fields
+    /// (the second field then breaks them into more runs), and lists in
+    /// random order. Caught: the run's items moved one place short, and a
+    /// search that skipped the run's first item.
     #[test]
     fn sort_few_runs_sorts() {
         let mut rng = Rng::new(5);
