@@ -51,14 +51,14 @@ fn hom(p: [f32; 4]) -> H {
 
 /// Most triangles in a leaf of [`Bvh`]. Why 8, not 4 as until the
 /// forty-fourth round: about half the nodes (the dragon's 651,135 →
-/// 353,875, the 5M scene's 3,527,215 → 1,908,137), so that scene's
-/// `verify` peaked at 1666–1672 MiB instead of 1721–1729 and built its
-/// index in 526–684 ms instead of 602–780, with the shadow check's queries
-/// no slower (443–485 against 477–510 ms for 16 lights; one thread, three
-/// alternated runs, local timers; on the dragon, four alternations,
-/// 141.6–150.0 ms against 143.7–166.1). 16 saved 30 MiB more, with
-/// queries the timers could not tell from 8's; 8 is the smaller change
-/// to a query's work.
+/// 353,875, the 5M scene's 3,527,215 → 1,908,137, by a local count), so
+/// that scene's `verify` peaked at 1666–1672 MiB instead of 1721–1729
+/// and built its index in 526–684 ms instead of 602–780, with the shadow
+/// check's queries no slower (443–485 against 477–510 ms for 16 lights;
+/// one thread, three alternated runs, local timers; on the dragon, four
+/// alternations, 141.6–150.0 ms against 143.7–166.1). 16 saved 30 MiB
+/// more, with queries the timers could not tell from 8's; 8 is the
+/// smaller change to a query's work.
 const LEAF: usize = 8;
 
 /// Bounding-volume hierarchy over triangles given as corner positions, in

@@ -1023,8 +1023,8 @@ impl ClosednessIndex {
                 entries[*at as usize] = ((x.max(y) as u64) << 32) | (o | negate) as u64;
             }
         });
-        // Reserved for every entry in either form (pages never written are
-        // never touched), so that none of them moves as it grows.
+        // Reserved for every entry (pages never written are never
+        // touched), so that neither moves as it grows.
         let mut index = ClosednessIndex {
             pair_entries: Vec::with_capacity(entries.len()),
             pair_keys: Vec::with_capacity(entries.len()),
