@@ -227,16 +227,9 @@ fn build_soup_stages(
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, welded.triangle_count(), max_mult);
-    let es = plan.edge_stats();
     let layout = layout::layout_planned(&welded, &edges, &plan);
     t.layout += ms(i);
-    let stats = mesh_stats(
-        soup,
-        soup.triangle_count(),
-        &welded,
-        &es,
-        plan.edge_instances(),
-    );
+    let stats = mesh_stats(soup, soup.triangle_count(), &welded, &plan);
     Built {
         welded,
         edges,
@@ -277,13 +270,8 @@ fn timed_weld(soup: &Soup, sources: bool, t: &mut Timings, stage: StageCallback<
 
 /// The header's statistics of one mesh (`input_triangles`: the soup's
 /// triangle count, passed because a build frees the soup's indices early).
-fn mesh_stats(
-    soup: &Soup,
-    input_triangles: usize,
-    welded: &Welded,
-    es: &topology::EdgeStats,
-    edge_instances: u64,
-) -> MeshStats {
+fn mesh_stats(soup: &Soup, input_triangles: usize, welded: &Welded, plan: &Plan) -> MeshStats {
+    let es = plan.edge_stats();
     MeshStats {
         primitives: soup.stats.primitives,
         input_triangles: input_triangles as u64,
@@ -292,9 +280,11 @@ fn mesh_stats(
         degenerate_triangles: welded.degenerate(),
         skipped_points: soup.stats.skipped_points,
         skipped_lines: soup.stats.skipped_lines,
-        triangles: welded.triangle_count() as u64,
+        // (Not the welded mesh's: a one-thread build gives its triangles
+        // to the topology.)
+        triangles: plan.triangles() as u64,
         edges: es.edges,
-        edge_instances,
+        edge_instances: plan.edge_instances(),
         open_edges: es.open_edges,
         non_manifold_edges: es.non_manifold_edges,
         max_fan: es.max_fan,
@@ -440,7 +430,7 @@ fn build_file_stages(
     }
     timings.weld = ms(quantise_start);
     // Without the welded triangles' sources (for `lint` only).
-    let welded = timed_weld(&soup, false, &mut timings, stage);
+    let mut welded = timed_weld(&soup, false, &mut timings, stage);
     // (The one count of the soup the header needs that freeing it loses.)
     let input_triangles = soup.triangle_count();
     // The headers, with what the edges decide (statistics, buckets) and
@@ -535,6 +525,16 @@ fn build_file_stages(
     // slow part of a fresh buffer, especially in a VM (benches/ROUNDS.md,
     // "Fifth round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
+    // With one thread and the caps written, the welded triangles too,
+    // once the topology has listed them
+    // (`topology::build_edges_opposites_only_owned`); if the header then
+    // outgrows its room, the caps are moved within the file, not filled
+    // again (`format::write_file_streamed_finishing`).
+    let give_triangles = ahead_file.is_some() && !two_threads;
+    let mut own_triangles = Vec::new();
+    if give_triangles {
+        std::mem::swap(&mut own_triangles, &mut welded.triangles);
+    }
     // With a file to write ahead into, the side blocks are copied while the
     // edges are made (`layout::write_sides_ahead`) on the thread that
     // copied the caps.
@@ -554,6 +554,10 @@ fn build_file_stages(
                     &mut consumer,
                 )
             }
+            None if give_triangles => topology::build_edges_opposites_only_owned(
+                std::mem::take(&mut own_triangles),
+                welded.positions.len(),
+            ),
             None => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         },
         || {
@@ -569,15 +573,14 @@ fn build_file_stages(
     timings.topology += ms(i);
     stage("layout");
     let i = Instant::now();
-    let plan = Plan::new(&edges, welded.triangle_count(), cfg.max_mult);
-    let es = plan.edge_stats();
+    let plan = Plan::new(&edges, triangles as usize, cfg.max_mult);
     // A compressed file is one zstd stream, written in order from whole
     // buffers; an uncompressed one is filled block by block at its offsets.
     let layout = cfg
         .compress
         .then(|| layout::layout_planned(&welded, &edges, &plan));
     timings.layout += ms(i);
-    let stats = mesh_stats(&soup, input_triangles, &welded, &es, plan.edge_instances());
+    let stats = mesh_stats(&soup, input_triangles, &welded, &plan);
     if stats.triangles == 0 {
         return Err(Error::input(
             input,

@@ -755,6 +755,13 @@ pub trait PayloadSource: Sync {
     /// [`PayloadSource::floats`]`(unit, s)` long. Every float must be
     /// written: the pieces hold whatever an earlier unit left there.
     fn fill(&self, unit: usize, outs: &mut [&mut [f32]]);
+    /// Whether [`PayloadSource::fill`] can write `unit`: false for a unit
+    /// whose input the caller freed once it was written ahead (see
+    /// [`write_file_streamed_finishing`]).
+    fn can_fill(&self, unit: usize) -> bool {
+        let _ = unit;
+        true
+    }
 }
 
 /// `buf` cut into consecutive pieces of `lens[i]` floats each (from its
@@ -835,6 +842,72 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
         Err(std::io::Error::new(
             std::io::ErrorKind::Unsupported,
             "positioned writes are not available on this platform",
+        ))
+    }
+}
+
+/// Moves the `len` bytes at `from` of `file` up to `to` (`to >= from`; the
+/// two ranges may overlap), a block at a time from the end, so that no
+/// byte is overwritten before it is read; and writes zeros over what the
+/// move leaves of `from..from + len` below `to`. The file grows if `to +
+/// len` is past its end.
+///
+/// Why: when a file's header outgrows its room, every section written
+/// ahead lies too low by as much; moving them is a copy within the page
+/// cache, where filling them again needs their input, which a one-thread
+/// build frees once the caps are written (`build`).
+fn move_up(file: &std::fs::File, from: u64, to: u64, len: u64) -> std::io::Result<()> {
+    debug_assert!(to >= from);
+    const STEP: u64 = 1 << 21;
+    let mut buf = vec![0u8; STEP.min(len) as usize];
+    let mut end = len;
+    while end > 0 {
+        let n = STEP.min(end);
+        let chunk = &mut buf[..n as usize];
+        read_at(file, chunk, from + end - n)?;
+        write_at(file, chunk, to + end - n)?;
+        end -= n;
+    }
+    let stale = (to - from).min(len);
+    if stale > 0 {
+        buf.clear();
+        buf.resize(STEP.min(stale) as usize, 0);
+        let mut at = 0;
+        while at < stale {
+            let n = STEP.min(stale - at);
+            write_at(file, &buf[..n as usize], from + at)?;
+            at += n;
+        }
+    }
+    Ok(())
+}
+
+/// Reads `buf.len()` bytes at `offset` of `file`.
+fn read_at(file: &std::fs::File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
+    }
+    #[cfg(windows)]
+    {
+        let (mut buf, mut offset) = (buf, offset);
+        while !buf.is_empty() {
+            match std::os::windows::fs::FileExt::seek_read(file, buf, offset)? {
+                0 => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+                n => {
+                    buf = &mut buf[n..];
+                    offset += n as u64;
+                }
+            }
+        }
+        Ok(())
+    }
+    #[cfg(not(any(unix, windows)))]
+    {
+        let _ = (file, buf, offset);
+        Err(std::io::Error::new(
+            std::io::ErrorKind::Unsupported,
+            "positioned reads are not available on this platform",
         ))
     }
 }
@@ -1175,45 +1248,68 @@ pub fn write_file_streamed_finishing(
 
     // The pieces written ahead that went exactly where this file puts them
     // (a unit's only non-empty piece, at its offset and length); a unit is
-    // written here unless it has one. Anything written elsewhere is cut off
-    // the file first (from the lowest such byte on, with every piece past
-    // it), so that no stale byte stays in a gap the writer leaves as zeros.
+    // written here unless it has one. A piece of the right unit, section
+    // and length that went lower in the file than this file puts it
+    // (because the header outgrew its room, see `header_room`, which moves
+    // every section up) is moved up to its place within the file. Anything
+    // else written elsewhere is cut off the file first (from the lowest
+    // such byte on, with every piece past it), so that no stale byte stays
+    // in a gap the writer leaves as zeros.
     let size = container_len(&header);
     // Per unit written ahead, its piece's section and CRC.
     let mut done: Vec<Option<(usize, crc32fast::Hasher)>> = (0..units).map(|_| None).collect();
     let (tmp, from) = match ahead {
         Some(a) => {
-            let fits = |p: &Piece| {
-                p.unit < units
+            // Where this file puts the piece, if it holds a whole unit.
+            let place = |p: &Piece| {
+                (p.unit < units
                     && p.section < sections
-                    && starts[p.unit * sections + p.section] == p.at
                     && source.floats(p.unit, p.section) as u64 * per_float == p.len
-                    && (0..sections).all(|s| s == p.section || source.floats(p.unit, s) == 0)
+                    && (0..sections).all(|s| s == p.section || source.floats(p.unit, s) == 0))
+                .then(|| starts[p.unit * sections + p.section])
             };
             let cut = a
                 .pieces
                 .iter()
-                .filter(|p| !fits(p))
+                .filter(|p| place(p).is_none_or(|at| at < p.at))
                 .map(|p| p.at)
                 .min()
                 .unwrap_or(u64::MAX);
-            let mut from = 0;
-            for p in a.pieces {
-                if fits(&p) && p.at + p.len <= cut && done[p.unit].is_none() {
-                    from = from.max(p.at + p.len);
-                    done[p.unit] = Some((p.section, p.crc));
-                }
-            }
             if cut != u64::MAX {
                 a.tmp
                     .as_file()
                     .set_len(cut)
                     .map_err(|e| Error::io(path, e))?;
             }
+            let mut kept: Vec<(Piece, u64)> = a
+                .pieces
+                .into_iter()
+                .filter_map(|p| place(&p).map(|at| (p, at)))
+                .filter(|(p, _)| p.at + p.len <= cut)
+                .collect();
+            // Highest first: each piece then moves into bytes no piece
+            // still to move is read from (see `move_up`).
+            kept.sort_by_key(|(p, _)| std::cmp::Reverse(p.at));
+            let mut from = 0;
+            for (p, at) in kept {
+                if done[p.unit].is_some() {
+                    continue;
+                }
+                if at != p.at {
+                    move_up(a.tmp.as_file(), p.at, at, p.len).map_err(|e| Error::io(path, e))?;
+                }
+                from = from.max(at + p.len);
+                done[p.unit] = Some((p.section, p.crc));
+            }
             (a.tmp, from)
         }
         None => (temp_beside(path)?, 0),
     };
+    if let Some(u) = (0..units).find(|&u| done[u].is_none() && !source.can_fill(u)) {
+        return Err(Error::Other(format!(
+            "internal error: unit {u} of the payload was not written ahead and cannot be filled again"
+        )));
+    }
     let file = tmp.as_file();
     file.set_len(size).map_err(|e| Error::io(path, e))?;
     preallocate(file, from, size);
@@ -1752,5 +1848,108 @@ mod tests {
                 assert_eq!(h.finalize(), want.finalize(), "{floats} floats, {enc:?}");
             }
         }
+    }
+
+    /// `move_up` puts a range's bytes at a higher offset, overlapping its
+    /// old place or not, across several of its 2 MiB steps, and zeroes what
+    /// is left of the old place below the new one; every other byte stays.
+    /// Caught: the steps taken from the start (an overlapping move copies
+    /// bytes it has already overwritten), and the stale bytes left.
+    #[test]
+    fn moving_a_range_up_keeps_its_bytes_and_zeroes_what_it_leaves() {
+        let len = (5 << 20) + 3;
+        let size = 3 * len;
+        let data: Vec<u8> = (0..size as u64)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8 | 1)
+            .collect();
+        for (from, to) in [
+            (100, 107),
+            (100, 100 + len / 2),
+            (100, 100 + 2 * len),
+            (64, 64),
+        ] {
+            let mut tmp = tempfile::NamedTempFile::new().unwrap();
+            tmp.write_all(&data).unwrap();
+            move_up(tmp.as_file(), from as u64, to as u64, len as u64).unwrap();
+            let got = std::fs::read(tmp.path()).unwrap();
+            let mut want = data.clone();
+            want.resize(want.len().max(to + len), 0);
+            want.copy_within(from..from + len, to);
+            want[from..to.min(from + len)].fill(0);
+            assert_eq!(got.len(), want.len(), "{from} -> {to}");
+            let first = got.iter().zip(&want).position(|(a, b)| a != b);
+            assert_eq!(first, None, "{from} -> {to}: first wrong byte");
+        }
+    }
+
+    /// A unit that was not written ahead and that its source cannot fill
+    /// again is an error, not a panic or a file with a hole. Caught: the
+    /// check left out (the source below panics when asked to fill).
+    #[test]
+    fn a_unit_no_one_can_fill_is_an_error() {
+        struct Freed;
+        impl PayloadSource for Freed {
+            fn units(&self) -> usize {
+                2
+            }
+            fn floats(&self, _: usize, section: usize) -> usize {
+                if section == 0 { 12 } else { 0 }
+            }
+            fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
+                assert!(unit != 1, "unit 1's input was freed");
+                outs[0].fill(1.0);
+            }
+            fn can_fill(&self, unit: usize) -> bool {
+                unit != 1
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("f.svpk");
+        let header = Header {
+            payload_offset: 0,
+            payload_len: 0,
+            payload_crc32: 0,
+            generator: "test".into(),
+            input: InputInfo {
+                file_name: "f.obj".into(),
+                format: "obj".into(),
+                bytes: 0,
+                sha256: [0; 32],
+            },
+            options: BuildOptions {
+                max_mult: 5,
+                compress: false,
+                positions: Encoding::F32.code(),
+            },
+            bounds_min: [0.0; 3],
+            bounds_max: [0.0; 3],
+            meshes: Vec::new(),
+            reserved: 0,
+        };
+        let mesh = MeshHeader {
+            name: "f".into(),
+            bounds_min: [0.0; 3],
+            bounds_max: [0.0; 3],
+            position_offset: [0.0; 3],
+            position_scale: [1.0; 3],
+            stats: MeshStats::default(),
+            caps: Section {
+                offset: 0,
+                length: 0,
+                count: 0,
+            },
+            buckets: Vec::new(),
+        };
+        let err =
+            write_file_streamed_finishing(&out, header, mesh, &Freed, None, &|| false, || {
+                (0, [0; 32])
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("unit 1") && err.contains("cannot be filled"),
+            "{err}"
+        );
+        assert!(!out.exists(), "no output");
     }
 }

@@ -228,6 +228,11 @@ impl Plan {
         self.counts.iter().sum()
     }
 
+    /// Number of caps triangles (the welded mesh's kept triangles).
+    pub fn triangles(&self) -> usize {
+        self.triangles
+    }
+
     /// Number of side fill blocks ([`BLOCK`] edges each).
     pub fn side_blocks(&self) -> usize {
         self.block_counts.len()
@@ -718,6 +723,12 @@ impl PayloadSource for Records<'_> {
         }
         self.plan
             .fill_sides(self.welded, self.edges, unit - caps, &mut by_k);
+    }
+
+    /// The caps need the welded triangles, which a one-thread build gives
+    /// to the topology once its caps are written ahead (`build`).
+    fn can_fill(&self, unit: usize) -> bool {
+        unit >= self.plan.cap_blocks() || self.welded.triangles.len() == 3 * self.plan.triangles
     }
 }
 

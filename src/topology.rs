@@ -15,6 +15,7 @@
 //! endpoint, a handful of records on real meshes (the vertex valence). See
 //! [`build_edges`].
 
+use std::borrow::Cow;
 use std::mem::MaybeUninit;
 
 /// Edges in compressed-row form.
@@ -136,7 +137,7 @@ impl Edges {
 pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
     crate::pool::one_job(|| {
         build_edges_in::<true>(
-            triangles,
+            triangles.into(),
             vertex_count,
             chunks_for(triangles),
             false,
@@ -153,7 +154,24 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
 /// triangle) pair (60 MB on a 5M-triangle scene), all of it fresh pages,
 /// and one write per record less.
 pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edges {
-    opposites_only(triangles, vertex_count, None).0
+    opposites_only(triangles.into(), vertex_count, None).0
+}
+
+/// [`build_edges_opposites_only`] on triangles it takes, and frees once
+/// they are listed (pass 2), before the arrays of the edges are allocated:
+/// those then reuse the triangles' pages instead of fresh ones.
+///
+/// Why: a build's one-thread path writes the caps before the edges are
+/// made, so nothing reads the welded triangles afterwards. On the
+/// 5M-triangle scene (60 MB of triangles) the topology stage faulted in 66
+/// MiB of fresh huge pages before, 40 after (`benches/fresh_pages.py
+/// --by-stage`, one thread); on this project's virtual machine a fresh huge
+/// page costs about 0.25 ms while the host still backs the memory and
+/// about 4.3 ms once it has taken it back (`alloc::cold_memory_seen`): the
+/// 5M scene's edges took 63 or 206 ms in eight one-thread builds (local
+/// timers), 33 fresh huge pages apart.
+pub fn build_edges_opposites_only_owned(triangles: Vec<u32>, vertex_count: usize) -> Edges {
+    opposites_only(triangles.into(), vertex_count, None).0
 }
 
 /// [`build_edges_opposites_only`], with `consumer` reading the edges while
@@ -169,7 +187,7 @@ pub fn build_edges_opposites_only_fed(
     vertex_count: usize,
     consumer: &mut (dyn FnMut(&EmitFeed) + Send),
 ) -> Edges {
-    opposites_only(triangles, vertex_count, Some(consumer)).0
+    opposites_only(triangles.into(), vertex_count, Some(consumer)).0
 }
 
 /// [`build_edges_opposites_only`], with the wall time of each of its four
@@ -178,21 +196,22 @@ pub fn build_edges_opposites_only_timed(
     triangles: &[u32],
     vertex_count: usize,
 ) -> (Edges, PassTimes) {
-    opposites_only(triangles, vertex_count, None)
+    opposites_only(triangles.into(), vertex_count, None)
 }
 
 /// The opposites-only edges with their passes' times, as one job on
 /// rayon's pool (see `crate::pool`).
 fn opposites_only(
-    triangles: &[u32],
+    triangles: Cow<'_, [u32]>,
     vertex_count: usize,
     consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
 ) -> (Edges, PassTimes) {
     crate::pool::one_job(|| {
+        let chunks = chunks_for(&triangles);
         build_edges_in::<false>(
             triangles,
             vertex_count,
-            chunks_for(triangles),
+            chunks,
             simd_available(),
             false,
             consumer,
@@ -228,7 +247,7 @@ fn chunks_for(triangles: &[u32]) -> usize {
 /// run both), and the passes' times. The public entry points run it as one
 /// job on rayon's pool (see `crate::pool`).
 fn build_edges_in<const TRI: bool>(
-    triangles: &[u32],
+    input: Cow<'_, [u32]>,
     vertex_count: usize,
     chunks: usize,
     simd: bool,
@@ -238,6 +257,7 @@ fn build_edges_in<const TRI: bool>(
     use rayon::prelude::*;
     use std::time::Instant;
     let started = Instant::now();
+    let triangles: &[u32] = &input;
     let tcount = triangles.len() / 3;
     // Record offsets (3 per triangle) are u32.
     assert!(
@@ -330,6 +350,11 @@ fn build_edges_in<const TRI: bool>(
             }
         });
     drop(heads);
+    // Nothing reads the triangles after pass 2: owned ones are freed here,
+    // before the edges' arrays are allocated
+    // (`build_edges_opposites_only_owned`).
+    drop(tri_chunks);
+    drop(input);
     // SAFETY: pass 1 counted every slot pass 2 writes, so all are written.
     unsafe {
         list.set_len(words * at);
@@ -2248,13 +2273,21 @@ mod tests {
         // 12 bytes.
         for (chunks, wide) in (1..=5).flat_map(|c| [(c, false), (c, true)]) {
             same_edges(
-                &build_edges_in::<true>(&tris, vertices, chunks, false, wide, None).0,
+                &build_edges_in::<true>((&tris[..]).into(), vertices, chunks, false, wide, None).0,
                 &expected,
                 &format!("{chunks} chunks, wide {wide}"),
             );
             for simd in [false, simd_available()] {
                 same_edges(
-                    &build_edges_in::<false>(&tris, vertices, chunks, simd, wide, None).0,
+                    &build_edges_in::<false>(
+                        (&tris[..]).into(),
+                        vertices,
+                        chunks,
+                        simd,
+                        wide,
+                        None,
+                    )
+                    .0,
                     &without_tri,
                     &format!("{chunks} chunks, opposites only, simd {simd}, wide {wide}"),
                 );
@@ -2274,6 +2307,12 @@ mod tests {
                 &without_tri,
                 &format!("{threads} threads, opposites only"),
             );
+            let got = pool.install(|| build_edges_opposites_only_owned(tris.clone(), vertices));
+            same_edges(
+                &got,
+                &without_tri,
+                &format!("{threads} threads, opposites only, owned"),
+            );
         }
         same_edges(
             &build_edges(&tris[..3000], vertices),
@@ -2283,7 +2322,7 @@ mod tests {
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(build_edges_opposites_only(&[], 5), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>(&tris[..3], vertices, 4, false, false, None).0,
+            build_edges_in::<true>((&tris[..3]).into(), vertices, 4, false, false, None).0,
             naive(&tris[..3])
         );
     }

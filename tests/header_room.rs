@@ -94,6 +94,32 @@ fn large_files_keep_room_and_are_the_same_bytes_on_any_thread_count() {
                 .collect();
             assert!(files[0] == files[1], "{what}: 1 and 2 threads differ");
             assert!(files[0] == files[2], "{what}: 1 and 3 threads differ");
+            // A compressed file is written in one go, nothing ahead: its
+            // container's payload is the reference for the pieces the other
+            // files wrote ahead and kept, or moved where the header outgrew
+            // its room.
+            let zout = tmp.path().join("z.svpk");
+            build(
+                &input,
+                &zout,
+                1,
+                &BuildConfig {
+                    compress: true,
+                    ..cfg
+                },
+            );
+            let z = format::read_file(&zout).unwrap();
+            let plain = format::read_file(&tmp.path().join("t1.svpk")).unwrap();
+            assert!(z.compressed && !plain.compressed);
+            assert_eq!(
+                z.header.payload_offset, plain.header.payload_offset,
+                "{what}"
+            );
+            let at = plain.header.payload_offset as usize;
+            assert!(
+                z.bytes[at..] == plain.bytes[at..],
+                "{what}: the payload differs from the compressed file's"
+            );
             let f = format::read_file(&tmp.path().join("t2.svpk")).unwrap();
             assert_eq!(f.version_minor, 1);
             let stats = &f.header.meshes[0].stats;
