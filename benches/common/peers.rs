@@ -119,7 +119,10 @@ pub fn meshopt_adjacency(positions: &[[f32; 3]], indices: &[u32]) -> Vec<u32> {
 /// the edge statistics, which the build takes from the plan's histogram
 /// (`Plan::edge_stats`; until the twenty-seventh round the stages bench also
 /// ran `topology::edge_stats`, a pass over the edges the build has not
-/// made since the fourteenth round).
+/// made since the fourteenth round). As a one-thread build does since the
+/// forty-fifth round, the topology takes the welded triangles and frees
+/// them once listed (`topology::build_edges_opposites_only_owned`), so the
+/// welded mesh returned has no triangles.
 pub fn ours_buckets(
     soup: &svpack::load::Soup,
 ) -> (
@@ -128,9 +131,13 @@ pub fn ours_buckets(
     svpack::topology::EdgeStats,
     svpack::layout::Plan,
 ) {
-    let w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
-    let e = svpack::topology::build_edges_opposites_only(&w.triangles, w.positions.len());
-    let plan = svpack::layout::Plan::new(&e, w.triangle_count(), svpack::layout::DEFAULT_MAX_MULT);
+    let mut w = svpack::weld::weld_without_sources(&soup.positions, &soup.indices);
+    let triangles = w.triangle_count();
+    let e = svpack::topology::build_edges_opposites_only_owned(
+        std::mem::take(&mut w.triangles),
+        w.positions.len(),
+    );
+    let plan = svpack::layout::Plan::new(&e, triangles, svpack::layout::DEFAULT_MAX_MULT);
     let stats = plan.edge_stats();
     (w, e, stats, plan)
 }
