@@ -483,7 +483,8 @@ fn build_file_stages(
     // (`format::AheadFile`): a file with header room
     // (`format::header_room`) starts its payload at an offset the edges do
     // not change (unless its mesh has more distinct opposite counts than
-    // the room holds: then the writer writes the caps again). With two
+    // the room holds: then the writer moves the caps up within the file,
+    // `format::write_file_streamed_finishing`). With two
     // threads or more the caps are written beside the edges, and the side
     // blocks as the edges are finished, where the first bucket is bucket
     // 2 (benches/ROUNDS.md, "Eighteenth round" and "Nineteenth round");

@@ -990,7 +990,8 @@ struct Piece {
 /// while the edges are being made (with one thread, from the soup before
 /// they are made), and side blocks while the rest of the edges are.
 /// [`write_file_streamed_finishing`] keeps every piece that went where
-/// the final file puts it and writes the others again.
+/// the final file puts it, moves up within the file those that went lower
+/// (the header outgrew its room), and writes the others again.
 ///
 /// Why: on ext4, writes into one file take the file's lock in turn, so the
 /// copy into the page cache is serial: with two threads, the write stage
@@ -1195,7 +1196,8 @@ fn write_unit(
 }
 
 /// [`write_file_streamed`], with the first units of the payload already
-/// written when `ahead` has them at the offsets this file puts them (else
+/// written when `ahead` has them at the offsets this file puts them (or
+/// lower, by a header that outgrew its room: then they are moved up; else
 /// they are discarded and written again), the header's input byte count
 /// and SHA-256 given by `input` once the payload is written, and `side`
 /// called, a slice
