@@ -1287,7 +1287,9 @@ pub fn write_file_streamed_finishing(
                 .pieces
                 .into_iter()
                 .filter_map(|p| place(&p).map(|at| (p, at)))
-                .filter(|(p, _)| p.at + p.len <= cut)
+                // (A piece placed lower than it went is empty, or past
+                // the cut: written again either way.)
+                .filter(|(p, at)| *at >= p.at && p.at + p.len <= cut)
                 .collect();
             // Highest first: each piece then moves into bytes no piece
             // still to move is read from (see `move_up`).

@@ -168,8 +168,8 @@ pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edg
 /// --by-stage`, one thread); on this project's virtual machine a fresh huge
 /// page costs about 0.25 ms while the host still backs the memory and
 /// about 4.3 ms once it has taken it back (`alloc::cold_memory_seen`): the
-/// 5M scene's edges took 63 or 206 ms in eight one-thread builds (local
-/// timers), 33 fresh huge pages apart.
+/// 5M scene's edges took 62.6–66.9 or 149.6–206.8 ms in eight one-thread
+/// builds (local timers), with the same page faults.
 pub fn build_edges_opposites_only_owned(triangles: Vec<u32>, vertex_count: usize) -> Edges {
     opposites_only(triangles.into(), vertex_count, None).0
 }
