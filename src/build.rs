@@ -532,10 +532,11 @@ fn build_file_stages(
     // outgrows its room, the caps are moved within the file, not filled
     // again (`format::write_file_streamed_finishing`).
     let give_triangles = ahead_file.is_some() && !two_threads;
-    let mut own_triangles = Vec::new();
-    if give_triangles {
-        std::mem::swap(&mut own_triangles, &mut welded.triangles);
-    }
+    let own_triangles = if give_triangles {
+        std::mem::take(&mut welded.triangles)
+    } else {
+        Vec::new()
+    };
     // With a file to write ahead into, the side blocks are copied while the
     // edges are made (`layout::write_sides_ahead`) on the thread that
     // copied the caps.
@@ -555,10 +556,9 @@ fn build_file_stages(
                     &mut consumer,
                 )
             }
-            None if give_triangles => topology::build_edges_opposites_only_owned(
-                std::mem::take(&mut own_triangles),
-                welded.positions.len(),
-            ),
+            None if give_triangles => {
+                topology::build_edges_opposites_only_owned(own_triangles, welded.positions.len())
+            }
             None => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         },
         || {
