@@ -114,14 +114,54 @@ pub fn cold_memory_seen() -> bool {
 /// file about to be written) will draw on the same free fragments as small
 /// pages: the small-page budget of a pause (see [`cold_memory_seen`])
 /// shrinks by as much, down to nothing. A build calls it with an estimate
-/// of its output as soon as it has read its input. Why: a 5M-triangle
-/// build (690 MiB output) whose buffers took small pages left its output
-/// cold pages: its write stage took 1.2–1.8 s against 0.2–0.6 s.
-pub fn reserve_page_cache(bytes: u64) {
-    #[cfg(target_os = "linux")]
-    sys::take_budget(bytes, true);
-    #[cfg(not(target_os = "linux"))]
-    let _ = bytes;
+/// of its output as soon as it has read its input, and sets the
+/// reservation to a bound from its triangle count once it has loaded them
+/// ([`PageCacheReservation::resize`]). Why: a 5M-triangle build (690 MiB
+/// output) whose buffers took small pages left its output cold pages: its
+/// write stage took 1.2–1.8 s against 0.2–0.6 s.
+pub fn reserve_page_cache(bytes: u64) -> PageCacheReservation {
+    let mut r = PageCacheReservation { taken: 0 };
+    r.resize(bytes);
+    r
+}
+
+/// The part of the small-page budget one output's page cache holds
+/// ([`reserve_page_cache`]). Dropping it gives nothing back: the output's
+/// pages stay in the cache after the build.
+#[derive(Debug)]
+pub struct PageCacheReservation {
+    /// Bytes actually taken from the budget (less than asked when the
+    /// budget ran out).
+    taken: u64,
+}
+
+impl PageCacheReservation {
+    /// Makes the reservation `bytes`: takes more from the budget (as much
+    /// as is left), or gives back what it holds beyond `bytes`. Why: the
+    /// first estimate, 8 bytes per input byte, comes before the input is
+    /// parsed; the 5M-triangle OBJ scene (204 MB) reserved 1.6 GB with it,
+    /// more than twice its 721 MB output and the whole budget, so that
+    /// its buffers never took small pages however cold the huge ones were
+    /// (benches/ROUNDS.md, "Forty-sixth round").
+    pub fn resize(&mut self, bytes: u64) {
+        #[cfg(target_os = "linux")]
+        {
+            if bytes > self.taken {
+                self.taken += sys::take_up_to(bytes - self.taken);
+            } else {
+                sys::give_back(self.taken - bytes);
+                self.taken = bytes;
+            }
+        }
+        #[cfg(not(target_os = "linux"))]
+        let _ = bytes;
+    }
+
+    /// Bytes this reservation holds (less than asked when the budget ran
+    /// out; always zero off Linux).
+    pub fn taken(&self) -> u64 {
+        self.taken
+    }
 }
 
 /// Smallest buffer that [`large_capacity`] rounds up to [`HUGE_MIN`] bytes.
@@ -486,20 +526,38 @@ mod sys {
     /// still backs after a rest, and the page cache that takes a build's
     /// output draws on the same fragments ([`super::reserve_page_cache`]).
     fn take_small(size: usize) -> bool {
-        take_budget(size as u64, false)
+        take_budget(size as u64)
     }
 
     /// Takes `bytes` from the small-page budget (measured first if it has
-    /// not been): all or nothing, or with `saturate` as much as is left.
-    pub fn take_budget(bytes: u64, saturate: bool) -> bool {
+    /// not been): all or nothing.
+    fn take_budget(bytes: u64) -> bool {
+        measure_budget();
+        SMALL_LEFT
+            .fetch_update(Relaxed, Relaxed, |left| left.checked_sub(bytes))
+            .is_ok()
+    }
+
+    /// Takes up to `bytes` from the small-page budget (measured first if it
+    /// has not been), as much as is left; returns what it took.
+    pub fn take_up_to(bytes: u64) -> u64 {
+        measure_budget();
+        let before = SMALL_LEFT
+            .fetch_update(Relaxed, Relaxed, |left| Some(left.saturating_sub(bytes)))
+            .unwrap_or(0);
+        before.min(bytes)
+    }
+
+    /// Returns `bytes` taken by [`take_up_to`] to the budget.
+    pub fn give_back(bytes: u64) {
+        let _ = SMALL_LEFT.fetch_update(Relaxed, Relaxed, |left| Some(left.saturating_add(bytes)));
+    }
+
+    /// Reads the budget the first time it is needed.
+    fn measure_budget() {
         if SMALL_LEFT.load(Relaxed) == u64::MAX {
             let _ = SMALL_LEFT.compare_exchange(u64::MAX, small_page_budget(), Relaxed, Relaxed);
         }
-        SMALL_LEFT
-            .fetch_update(Relaxed, Relaxed, |left| {
-                left.checked_sub(bytes).or(saturate.then_some(0))
-            })
-            .is_ok()
     }
 
     /// Sets the budget of [`take_small`] (tests).
@@ -547,18 +605,30 @@ mod sys {
         if p == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        // During a pause, small pages while the budget lasts. With the
-        // budget spent (a build whose output takes the warm memory) there
-        // is nothing to probe for: huge pages, as without the probe.
+        advise_fresh(p.cast(), size, 0, cold, pause);
+        p.cast()
+    }
+
+    /// Gives the mapping `p` of `size` bytes, fresh from byte `fresh` on,
+    /// the hint or small pages. During a pause, small pages while the
+    /// budget lasts. Otherwise the hint, and the first whole huge page of
+    /// the fresh part is faulted in and timed: slower than `cold`, the hint
+    /// pauses for `pause` and the mapping takes small pages (while the
+    /// budget lasts). With the budget spent (a build whose output takes the
+    /// warm memory) there is nothing to probe for: huge pages, as without
+    /// the probe.
+    fn advise_fresh(p: *mut u8, size: usize, fresh: usize, cold: Duration, pause: Duration) {
         let hint = hinting();
-        advise(p, size, hint || !take_small(size));
-        if hint && SMALL_LEFT.load(Relaxed) > 0 && first_huge_fault(p.cast(), size) > cold {
+        let len = size - fresh;
+        advise(p.cast(), size, hint || !take_small(len));
+        // SAFETY: `fresh <= size`, inside the mapping.
+        let tail = unsafe { p.add(fresh) };
+        if hint && SMALL_LEFT.load(Relaxed) > 0 && first_huge_fault(tail, len) > cold {
             pause_hinting(pause);
-            if take_small(size) {
-                advise(p, size, false);
+            if take_small(len) {
+                advise(p.cast(), size, false);
             }
         }
-        p.cast()
     }
 
     /// Faults in the first whole huge page of the fresh mapping `p` of
@@ -602,13 +672,33 @@ mod sys {
     /// # Safety
     /// `p` must come from [`map`] or [`remap`] with length `old`.
     pub unsafe fn remap(p: *mut u8, old: usize, new: usize) -> *mut u8 {
+        // SAFETY: the caller's contract.
+        unsafe { remap_with(p, old, new, super::COLD_FAULT, super::COLD_PAUSE) }
+    }
+
+    /// [`remap`] with `cold` and `pause` for the new tail's probe (see
+    /// [`map_with`]).
+    ///
+    /// # Safety
+    /// As for [`remap`].
+    pub unsafe fn remap_with(
+        p: *mut u8,
+        old: usize,
+        new: usize,
+        cold: Duration,
+        pause: Duration,
+    ) -> *mut u8 {
         // SAFETY: the caller's contract; MAYMOVE lets the kernel move the
         // page tables when the range cannot grow in place.
         let q = unsafe { libc::mremap(p.cast(), old, new, libc::MREMAP_MAYMOVE) };
         if q == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        advise(q, new, hinting() || !take_small(new - old));
+        // The new tail is probed as a fresh mapping is: a kept block grown
+        // by 56 MiB (the 5M scene's welded triangles, from a kept 2 MiB
+        // block) took cold huge pages unprobed, and only the next fresh
+        // block found the memory cold.
+        advise_fresh(q.cast(), new, old, cold, pause);
         q.cast()
     }
 }
@@ -829,6 +919,57 @@ mod tests {
         }
     }
 
+    /// A block grown in place (`mremap`) has its new tail probed as a
+    /// fresh block is: a slow first fault there pauses the hint and gives
+    /// the block small pages while the budget lasts; with no budget,
+    /// nothing is probed. The kept bytes stay, the tail is zero. Caught:
+    /// the tail not probed (the hint kept, no pause: how the 5M scene's
+    /// welded triangles took cold huge pages), the probe's write landing
+    /// in the kept part (its bytes changed), and a probe with no budget.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_grown_block_probes_its_new_tail() {
+        use std::time::Duration;
+        let _serial = SERIAL.lock().unwrap();
+        let thp_on = std::fs::read_to_string("/sys/kernel/mm/transparent_hugepage/enabled")
+            .is_ok_and(|s| !s.contains("[never]"));
+        let (old, new) = (2 * HUGE_MIN, 5 * HUGE_MIN);
+        let long = Duration::from_secs(3600);
+        let grown = |cold: Duration| unsafe {
+            sys::end_pause();
+            let p = sys::map_with(old, Duration::MAX, long);
+            assert!(!p.is_null());
+            std::slice::from_raw_parts_mut(p, old).fill(7);
+            let q = sys::remap_with(p, old, new, cold, long);
+            assert!(!q.is_null());
+            q
+        };
+        // A fast tail keeps the hint.
+        sys::set_small_budget(u64::MAX - 1);
+        let warm = grown(Duration::MAX);
+        assert!(sys::hinting(), "a fast tail");
+        assert_eq!(thp_eligible(warm), Some(thp_on), "a fast tail");
+        // A slow one: pause, small pages.
+        let cold = grown(Duration::ZERO);
+        assert!(cold_memory_seen() && !sys::hinting(), "a slow tail");
+        assert_eq!(thp_eligible(cold), Some(false), "a slow tail");
+        // No budget: no probe, whatever the fault costs.
+        sys::set_small_budget(0);
+        let unprobed = grown(Duration::ZERO);
+        assert!(sys::hinting(), "a probe with no budget");
+        assert_eq!(thp_eligible(unprobed), Some(thp_on), "no budget");
+        sys::end_pause();
+        sys::set_small_budget(u64::MAX);
+        for q in [warm, cold, unprobed] {
+            unsafe {
+                let s = std::slice::from_raw_parts_mut(q, new);
+                assert!(s[..old].iter().all(|&b| b == 7), "the kept bytes");
+                assert!(s[old..].iter().all(|&b| b == 0), "the new tail");
+                sys::unmap(q, new);
+            }
+        }
+    }
+
     /// `/proc/buddyinfo` counts: every zone's blocks below the order
     /// asked, 4 KiB · 2^order each. Caught: the zone's name read as a
     /// count, and orders at or above the limit counted.
@@ -857,17 +998,39 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     }
 
     /// The output's expected page cache comes off the small-page budget,
-    /// down to nothing. Caught: the budget left unchanged, and a reserve
-    /// larger than the budget refused whole (the budget kept).
+    /// down to nothing, and a smaller estimate later gives back what the
+    /// reservation took beyond it, never more. Caught: the budget left
+    /// unchanged, a reserve larger than the budget refused whole (the
+    /// budget kept), a reservation counting what it asked for rather than
+    /// what it took (a later shrink gives back more than it took), and a
+    /// shrink giving nothing back.
     #[cfg(target_os = "linux")]
     #[test]
     fn a_reserved_page_cache_shrinks_the_small_page_budget() {
         let _serial = SERIAL.lock().unwrap();
-        sys::set_small_budget(10 << 20);
-        reserve_page_cache(4 << 20);
-        assert_eq!(sys::small_budget_left(), 6 << 20);
-        reserve_page_cache(100 << 20);
+        const MIB: u64 = 1 << 20;
+        sys::set_small_budget(10 * MIB);
+        let small = reserve_page_cache(4 * MIB);
+        assert_eq!(sys::small_budget_left(), 6 * MIB);
+        let mut large = reserve_page_cache(100 * MIB);
         assert_eq!(sys::small_budget_left(), 0);
+        assert_eq!(large.taken(), 6 * MIB, "only what was left");
+        // Shrunk below what it took: the difference comes back.
+        large.resize(2 * MIB);
+        assert_eq!(
+            (large.taken(), sys::small_budget_left()),
+            (2 * MIB, 4 * MIB)
+        );
+        // Grown again: as much as is left.
+        large.resize(50 * MIB);
+        assert_eq!((large.taken(), sys::small_budget_left()), (6 * MIB, 0));
+        // Shrunk while others hold the rest: back to what it took less the
+        // new size, whatever it asked for before.
+        large.resize(5 * MIB);
+        assert_eq!(sys::small_budget_left(), MIB);
+        large.resize(0);
+        assert_eq!(sys::small_budget_left(), 6 * MIB);
+        assert_eq!(small.taken(), 4 * MIB);
         sys::set_small_budget(u64::MAX);
     }
 
