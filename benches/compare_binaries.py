@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Alternates two svpack binaries on one input and compares their builds.
 
-Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] [--rest SECONDS] [--threads T[,T...]] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
+Usage: python3 benches/compare_binaries.py [--allow-different] [--replace] [--rest SECONDS] [--threads T[,T...]] [--by-slot] OLD_BINARY NEW_BINARY INPUT [ROUNDS]
 
 Each round runs `build INPUT -o FRESH --timings --threads T --json` with
 T = 1 and 2 (or the counts --threads lists), the two binaries back to back in alternating order (this
@@ -20,6 +20,15 @@ per binary and thread count, the fastest and median whole build, time after pars
 largest peak memory; checks that both binaries wrote the same bytes in every run (with
 --allow-different, for versions whose headers are known to differ, it only
 says how many runs differed).
+
+With --by-slot the rows are split by the build's place in its pair: first
+(right after the last pair's outputs were removed) or second (right after
+the first build of the pair). Why: on a virtual machine whose host takes
+freed memory back, the first build's output can take the page cache the
+removed outputs freed, still backed, and the second's cannot; on the 5M
+scene the second slot's write stage took five times the first's
+(benches/ROUNDS.md, "Forty-sixth round"), so a median over both slots
+mixes two populations.
 """
 import filecmp
 import json
@@ -58,7 +67,8 @@ def main():
         i = args.index("--threads")
         threads = tuple(int(t) for t in args[i + 1].split(","))
         del args[i:i + 2]
-    args = [a for a in args if a not in ("--allow-different", "--replace")]
+    by_slot = "--by-slot" in args
+    args = [a for a in args if a not in ("--allow-different", "--replace", "--by-slot")]
     if len(args) not in (3, 4):
         sys.exit(__doc__)
     old, new, inp = args[:3]
@@ -73,9 +83,10 @@ def main():
         for r in range(rounds):
             for t in threads:
                 outs = {}
-                for name in (["old", "new"] if r % 2 == 0 else ["new", "old"]):
+                for slot, name in enumerate(["old", "new"] if r % 2 == 0 else ["new", "old"]):
                     outs[name] = os.path.join(work, name + ".svpk")
-                    res.setdefault((name, t), []).append(
+                    key = (name, t, ("first", "second")[slot] if by_slot else "")
+                    res.setdefault(key, []).append(
                         build(bins[name], inp, outs[name], t, replace, rest))
                 # Compared in small chunks: reading both outputs whole took
                 # 250 MB of memory between runs, whose freeing changed what
@@ -94,14 +105,18 @@ def main():
                         os.remove(o)
     if allow_different:
         print(f"{different} of {len(threads) * rounds} pairs of outputs differed")
-    print("| binary | threads | whole build, fastest / median (ms) | after parsing, fastest / median (ms) "
-          "| weld | topology | layout + write | peak memory (MiB) |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for (name, t), v in sorted(res.items(), key=lambda kv: (kv[0][1], kv[0][0] != "old")):
+    slot_head = " slot |" if by_slot else ""
+    print(f"| binary | threads |{slot_head} whole build, fastest / median (ms) "
+          "| after parsing, fastest / median (ms) | weld | topology | layout + write "
+          "| peak memory (MiB) |")
+    print("|---|---:|" + ("---|" if by_slot else "") + "---:|---:|---:|---:|---:|---:|")
+    for (name, t, slot), v in sorted(res.items(),
+                                     key=lambda kv: (kv[0][1], kv[0][2], kv[0][0] != "old")):
         def col(i):
             x = sorted(run[i] for run in v)
             return f"{x[0]:.1f} / {x[len(x) // 2]:.1f}"
-        print(f"| {name} | {t} | {col(3)} | {col(0)} | {col(4)} | {col(5)} | {col(1)} "
+        slot_cell = f" {slot} |" if by_slot else ""
+        print(f"| {name} | {t} |{slot_cell} {col(3)} | {col(0)} | {col(4)} | {col(5)} | {col(1)} "
               f"| {max(x[2] for x in v):.1f} |")
 
 
