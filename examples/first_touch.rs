@@ -22,6 +22,17 @@
 //! sleep 4; target/release/examples/first_touch 48        # cold huge pages
 //! sleep 4; target/release/examples/first_touch 48 small  # small pages
 //! ```
+//!
+//! With `steps` after the size, each huge page's first fault is timed on
+//! its own, and the first round prints how many were slower than 2 ms and
+//! where the first of them was: right after another run, a block's first
+//! pages come warm (the blocks freed last) and its later ones can come
+//! cold, which a probe of the first page alone (`alloc::cold_memory_seen`)
+//! does not see (`alloc::populate`):
+//!
+//! ```text
+//! target/release/examples/first_touch 100 steps
+//! ```
 
 #[cfg(target_os = "linux")]
 fn main() {
@@ -31,6 +42,7 @@ fn main() {
         .map(|a| a.parse().expect("MIB: a size in MiB"))
         .unwrap_or(400);
     let small = std::env::args().nth(2).as_deref() == Some("small");
+    let steps = std::env::args().nth(2).as_deref() == Some("steps");
     let size = mib << 20;
     for round in 0..4 {
         // SAFETY: an anonymous private mapping has no preconditions; it is
@@ -52,11 +64,31 @@ fn main() {
             };
             libc::madvise(p, size, advice);
             let bytes = p as *mut u8;
+            let mut step_ms = Vec::new();
             let t = Instant::now();
             for i in (0..size).step_by(4096) {
+                if steps && i % (2 << 20) == 0 {
+                    let s = Instant::now();
+                    bytes.add(i).write_volatile(1);
+                    step_ms.push(s.elapsed().as_secs_f64() * 1e3);
+                }
                 bytes.add(i).write_volatile(1);
             }
             let touch = t.elapsed().as_secs_f64();
+            if steps {
+                // Each huge page's fault, in the order the pages were
+                // touched: which were slower than 2 ms (faulted in by the
+                // host as well).
+                let cold: Vec<usize> = (0..step_ms.len()).filter(|&i| step_ms[i] > 2.0).collect();
+                println!(
+                    "round {round}: {} of {} huge pages slower than 2 ms, the first at {:?}; \
+                     the first eight {:.2?} ms",
+                    cold.len(),
+                    step_ms.len(),
+                    cold.first(),
+                    &step_ms[..step_ms.len().min(8)]
+                );
+            }
             let t = Instant::now();
             std::ptr::write_bytes(bytes, 0, size);
             std::hint::black_box(bytes.add(size / 2).read_volatile());
