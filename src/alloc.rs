@@ -115,8 +115,8 @@ pub fn cold_memory_seen() -> bool {
 /// pages: the small-page budget of a pause (see [`cold_memory_seen`])
 /// shrinks by as much, down to nothing. A build calls it with an estimate
 /// of its output as soon as it has read its input, and sets the
-/// reservation to a bound from its triangle count once it has loaded them
-/// ([`PageCacheReservation::resize`]). Why: a 5M-triangle build (690 MiB
+/// reservation to the output its triangles are expected to give once it
+/// has loaded them ([`PageCacheReservation::resize`]). Why: a 5M-triangle build (690 MiB
 /// output) whose buffers took small pages left its output cold pages: its
 /// write stage took 1.2–1.8 s against 0.2–0.6 s.
 pub fn reserve_page_cache(bytes: u64) -> PageCacheReservation {
@@ -605,30 +605,18 @@ mod sys {
         if p == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        advise_fresh(p.cast(), size, 0, cold, pause);
-        p.cast()
-    }
-
-    /// Gives the mapping `p` of `size` bytes, fresh from byte `fresh` on,
-    /// the hint or small pages. During a pause, small pages while the
-    /// budget lasts. Otherwise the hint, and the first whole huge page of
-    /// the fresh part is faulted in and timed: slower than `cold`, the hint
-    /// pauses for `pause` and the mapping takes small pages (while the
-    /// budget lasts). With the budget spent (a build whose output takes the
-    /// warm memory) there is nothing to probe for: huge pages, as without
-    /// the probe.
-    fn advise_fresh(p: *mut u8, size: usize, fresh: usize, cold: Duration, pause: Duration) {
+        // During a pause, small pages while the budget lasts. With the
+        // budget spent (a build whose output takes the warm memory) there
+        // is nothing to probe for: huge pages, as without the probe.
         let hint = hinting();
-        let len = size - fresh;
-        advise(p.cast(), size, hint || !take_small(len));
-        // SAFETY: `fresh <= size`, inside the mapping.
-        let tail = unsafe { p.add(fresh) };
-        if hint && SMALL_LEFT.load(Relaxed) > 0 && first_huge_fault(tail, len) > cold {
+        advise(p, size, hint || !take_small(size));
+        if hint && SMALL_LEFT.load(Relaxed) > 0 && first_huge_fault(p.cast(), size) > cold {
             pause_hinting(pause);
-            if take_small(len) {
-                advise(p.cast(), size, false);
+            if take_small(size) {
+                advise(p, size, false);
             }
         }
+        p.cast()
     }
 
     /// Faults in the first whole huge page of the fresh mapping `p` of
@@ -672,33 +660,13 @@ mod sys {
     /// # Safety
     /// `p` must come from [`map`] or [`remap`] with length `old`.
     pub unsafe fn remap(p: *mut u8, old: usize, new: usize) -> *mut u8 {
-        // SAFETY: the caller's contract.
-        unsafe { remap_with(p, old, new, super::COLD_FAULT, super::COLD_PAUSE) }
-    }
-
-    /// [`remap`] with `cold` and `pause` for the new tail's probe (see
-    /// [`map_with`]).
-    ///
-    /// # Safety
-    /// As for [`remap`].
-    pub unsafe fn remap_with(
-        p: *mut u8,
-        old: usize,
-        new: usize,
-        cold: Duration,
-        pause: Duration,
-    ) -> *mut u8 {
         // SAFETY: the caller's contract; MAYMOVE lets the kernel move the
         // page tables when the range cannot grow in place.
         let q = unsafe { libc::mremap(p.cast(), old, new, libc::MREMAP_MAYMOVE) };
         if q == libc::MAP_FAILED {
             return std::ptr::null_mut();
         }
-        // The new tail is probed as a fresh mapping is: a kept block grown
-        // by 56 MiB (the 5M scene's welded triangles, from a kept 2 MiB
-        // block) took cold huge pages unprobed, and only the next fresh
-        // block found the memory cold.
-        advise_fresh(q.cast(), new, old, cold, pause);
+        advise(q, new, hinting() || !take_small(new - old));
         q.cast()
     }
 }
@@ -915,57 +883,6 @@ mod tests {
                 assert!(s.iter().all(|&b| b == 0));
                 s.fill(1);
                 sys::unmap(p, size);
-            }
-        }
-    }
-
-    /// A block grown in place (`mremap`) has its new tail probed as a
-    /// fresh block is: a slow first fault there pauses the hint and gives
-    /// the block small pages while the budget lasts; with no budget,
-    /// nothing is probed. The kept bytes stay, the tail is zero. Caught:
-    /// the tail not probed (the hint kept, no pause: how the 5M scene's
-    /// welded triangles took cold huge pages), the probe's write landing
-    /// in the kept part (its bytes changed), and a probe with no budget.
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn a_grown_block_probes_its_new_tail() {
-        use std::time::Duration;
-        let _serial = SERIAL.lock().unwrap();
-        let thp_on = std::fs::read_to_string("/sys/kernel/mm/transparent_hugepage/enabled")
-            .is_ok_and(|s| !s.contains("[never]"));
-        let (old, new) = (2 * HUGE_MIN, 5 * HUGE_MIN);
-        let long = Duration::from_secs(3600);
-        let grown = |cold: Duration| unsafe {
-            sys::end_pause();
-            let p = sys::map_with(old, Duration::MAX, long);
-            assert!(!p.is_null());
-            std::slice::from_raw_parts_mut(p, old).fill(7);
-            let q = sys::remap_with(p, old, new, cold, long);
-            assert!(!q.is_null());
-            q
-        };
-        // A fast tail keeps the hint.
-        sys::set_small_budget(u64::MAX - 1);
-        let warm = grown(Duration::MAX);
-        assert!(sys::hinting(), "a fast tail");
-        assert_eq!(thp_eligible(warm), Some(thp_on), "a fast tail");
-        // A slow one: pause, small pages.
-        let cold = grown(Duration::ZERO);
-        assert!(cold_memory_seen() && !sys::hinting(), "a slow tail");
-        assert_eq!(thp_eligible(cold), Some(false), "a slow tail");
-        // No budget: no probe, whatever the fault costs.
-        sys::set_small_budget(0);
-        let unprobed = grown(Duration::ZERO);
-        assert!(sys::hinting(), "a probe with no budget");
-        assert_eq!(thp_eligible(unprobed), Some(thp_on), "no budget");
-        sys::end_pause();
-        sys::set_small_budget(u64::MAX);
-        for q in [warm, cold, unprobed] {
-            unsafe {
-                let s = std::slice::from_raw_parts_mut(q, new);
-                assert!(s[..old].iter().all(|&b| b == 7), "the kept bytes");
-                assert!(s[old..].iter().all(|&b| b == 0), "the new tail");
-                sys::unmap(q, new);
             }
         }
     }
