@@ -397,7 +397,8 @@ fn build_file_stages(
     // The output's page cache, about 8 bytes per input byte (the dragon:
     // 125 MB from a 16 MB GLB, a third of that from its OBJ), competes
     // with small pages for warm memory (`alloc::reserve_page_cache`);
-    // set to a bound from the triangles once they are loaded.
+    // set to the output the triangles are expected to give once they are
+    // loaded.
     let mut page_cache = crate::alloc::reserve_page_cache(8 * data.len() as u64);
     // A glTF's soup is checked by its loader while the input's digest runs
     // on, and the digest's last bytes are hashed while the payload is

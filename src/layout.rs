@@ -831,8 +831,9 @@ mod tests {
     /// The estimate is exact for separate triangles (every edge open) and
     /// for a closed torus, over by the Euler characteristic's edges
     /// otherwise (2 for a closed sphere, a tetrahedron), and counts each
-    /// edge once however many opposite vertices it has. Caught: the edges not capped at one per record
-    /// (separate triangles over), and the caps left out.
+    /// edge once however many opposite vertices it has. Caught: the edges
+    /// not capped at one per record (separate triangles over), and the
+    /// caps left out.
     #[test]
     fn the_expected_payload_is_exact_for_open_and_closed_meshes() {
         let separate = |n: usize| {
