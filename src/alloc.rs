@@ -116,9 +116,10 @@ pub fn cold_memory_seen() -> bool {
 /// shrinks by as much, down to nothing. A build calls it with an estimate
 /// of its output as soon as it has read its input, and sets the
 /// reservation to the output its triangles are expected to give once it
-/// has loaded them ([`PageCacheReservation::resize`]). Why: a 5M-triangle build (690 MiB
-/// output) whose buffers took small pages left its output cold pages: its
-/// write stage took 1.2–1.8 s against 0.2–0.6 s.
+/// has loaded them ([`PageCacheReservation::resize`]). Why: a
+/// 5M-triangle build (690 MiB output) whose buffers took small pages left
+/// its output cold pages: its write stage took 1.2–1.8 s against 0.2–0.6
+/// s.
 pub fn reserve_page_cache(bytes: u64) -> PageCacheReservation {
     let mut r = PageCacheReservation { taken: 0 };
     r.resize(bytes);
