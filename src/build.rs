@@ -265,6 +265,7 @@ fn timed_weld(soup: &Soup, sources: bool, t: &mut Timings, stage: StageCallback<
         weld::weld_without_sources(&soup.positions, &soup.indices)
     };
     t.weld += ms(i);
+    crate::trace::since("weld", i);
     welded
 }
 
@@ -417,6 +418,7 @@ fn build_file_stages(
         }
     };
     timings.load = ms(start);
+    crate::trace::since("load", start);
     // What the output is expected to take (`layout::expected_payload_bytes`,
     // with room for the largest header), against 8 bytes per input byte
     // before parsing: the 5M scene (OBJ text, 41 bytes a triangle) 1.6 GB
@@ -587,6 +589,7 @@ fn build_file_stages(
     sides_ahead?;
     let ahead = ahead_file.map(format::AheadFile::finish);
     timings.topology += ms(i);
+    crate::trace::since("topology", i);
     stage("layout");
     let i = Instant::now();
     let plan = Plan::new(&edges, triangles as usize, cfg.max_mult);
@@ -596,6 +599,7 @@ fn build_file_stages(
         .compress
         .then(|| layout::layout_planned(&welded, &edges, &plan));
     timings.layout += ms(i);
+    crate::trace::since("layout", i);
     let stats = mesh_stats(&soup, input_triangles, &welded, &plan);
     if stats.triangles == 0 {
         return Err(Error::input(
@@ -649,6 +653,7 @@ fn build_file_stages(
         }
     };
     timings.write = ms(write_start);
+    crate::trace::since("write", write_start);
     timings.total = ms(start);
     Ok(BuildOutput {
         header,

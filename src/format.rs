@@ -804,13 +804,21 @@ impl WriteTurns {
         side: &dyn Fn() -> bool,
     ) -> std::io::Result<()> {
         use std::sync::atomic::Ordering::Relaxed;
+        let wait = crate::trace::now();
+        let mut waited = false;
         while self.0.load(Relaxed) {
+            waited = true;
             if !side() {
                 break;
             }
         }
+        if let (Some(wait), true) = (wait, waited) {
+            crate::trace::since("wait for the file", wait);
+        }
         self.0.store(true, Relaxed);
+        let write = crate::trace::span("file write");
         let written = write_at(file, bytes, offset);
+        write.end();
         self.0.store(false, Relaxed);
         written
     }
@@ -1168,7 +1176,9 @@ fn write_unit(
         fbuf.fill(f32::from_bits(UNWRITTEN));
     }
     let mut outs = split_pieces(fbuf, &lens);
+    let fill = crate::trace::span_n("fill", u as u64);
     source.fill(u, &mut outs);
+    fill.end();
     debug_assert!(
         fbuf.iter().all(|f| f.to_bits() != UNWRITTEN),
         "unit {u}: the payload source left floats unwritten"
@@ -1178,6 +1188,7 @@ fn write_unit(
     for (s, &n) in lens.iter().enumerate() {
         let piece = &fbuf[at..at + n];
         at += n;
+        let crc = crate::trace::span_n("encode and checksum", u as u64);
         let bytes: &[u8] = if enc == Encoding::F32 && cfg!(target_endian = "little") {
             bytemuck::cast_slice(piece)
         } else {
@@ -1187,6 +1198,7 @@ fn write_unit(
         };
         let mut h = crc32fast::Hasher::new();
         h.update(bytes);
+        crc.end();
         if !bytes.is_empty() {
             write(bytes, starts[s])?;
         }

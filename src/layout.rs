@@ -674,7 +674,11 @@ pub fn write_sides_ahead(
                 return Ok(());
             }
             // All of block `blk`'s edges are done, or every edge is.
+            let wait = crate::trace::now();
             let (done, ended) = feed.wait((blk + 1) * BLOCK, side);
+            if let Some(wait) = wait {
+                crate::trace::since_n("wait for edges", blk as u64, wait);
+            }
             debug_assert!(ended || done >= (blk + 1) * BLOCK);
             if blk * BLOCK >= done {
                 return Ok(());

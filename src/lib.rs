@@ -25,5 +25,6 @@ pub mod removals;
 pub mod report;
 pub mod shadow;
 pub mod topology;
+pub mod trace;
 pub mod verify;
 pub mod weld;

@@ -148,6 +148,12 @@ enum Command {
         /// JSON).
         #[arg(long)]
         timings: bool,
+        /// Write a timeline of the build's threads to FILE, as Chrome trace
+        /// event JSON (open it in ui.perfetto.dev): the stages, the weld's
+        /// steps, the topology's passes, each unit's fill and write, and the
+        /// waits between them. `benches/trace_summary.py FILE` sums it up.
+        #[arg(long, value_name = "FILE")]
+        trace: Option<PathBuf>,
         #[command(flatten)]
         lights: LightArgs,
     },
@@ -526,6 +532,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             json,
             verify,
             timings,
+            trace,
             lights,
         } => {
             let cfg = BuildConfig {
@@ -546,6 +553,11 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             };
             let jobs = if jobs == 0 { cli.threads } else { jobs };
             let bar = progress::for_build(&inputs, cli.quiet);
+            let trace_file = trace
+                .as_deref()
+                .map(svpack::trace::TraceFile::create)
+                .transpose()?;
+            let recording = trace_file.as_ref().map(|_| svpack::trace::start());
             let results = svpack::build::build_batch_with(
                 &inputs,
                 &outputs,
@@ -555,6 +567,9 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                 &|_| bar.done_one(),
             );
             bar.finish();
+            if let (Some(file), Some(recording)) = (trace_file, recording) {
+                file.write(&recording.finish())?;
+            }
             let mut failures = Vec::new();
             let mut json_items = Vec::new();
             let mut verify_failed = false;

@@ -284,6 +284,7 @@ fn build_edges_in<const TRI: bool>(
     let counts: Vec<Vec<u64>> = tri_chunks
         .par_iter()
         .map(|tris| {
+            let _part = crate::trace::span("topology: count (part)");
             let (count, odd) = count_chunk(tris, ranges, simd, parity);
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
             count
@@ -301,6 +302,7 @@ fn build_edges_in<const TRI: bool>(
     let at = list_start[ranges] as usize;
 
     let counted = Instant::now();
+    crate::trace::between("topology: count", started, counted);
     // Pass 2: list each triangle under its lo and mid corners, appended to
     // the corner's range. The listings are allocated uninitialised: every
     // slot is written exactly once below (checked where pass 3 reads them,
@@ -333,6 +335,7 @@ fn build_edges_in<const TRI: bool>(
         .zip(heads.par_iter_mut())
         .enumerate()
         .for_each(|(ci, (tris, head))| {
+            let _part = crate::trace::span("topology: list (part)");
             let first_id = (ci * per) as u32;
             // SAFETY: chunk `ci` owns, in each range r, the slots from
             // `head[r]` on, as many as pass 1 counted for it; these are
@@ -368,6 +371,7 @@ fn build_edges_in<const TRI: bool>(
         narrow: Buckets::narrow_for(vertex_count),
     };
     let listed = Instant::now();
+    crate::trace::between("topology: list", counted, listed);
     // Pass 3: the edges with their opposite vertices and triangles, one
     // job per group of consecutive ranges, the groups holding about equal
     // numbers of records (one group per thread: within a group, edges are
@@ -443,8 +447,10 @@ fn build_edges_in<const TRI: bool>(
         jobs.into_par_iter()
             .enumerate()
             .map_init(
-                Scratch::new,
-                |scratch: &mut Scratch, (g, [zero, ot, oa, ob, os])| {
+                // (A split's span lasts as long as its scratch.)
+                || (Scratch::new(), crate::trace::span("topology: emit (part)")),
+                |(scratch, _part): &mut (Scratch, crate::trace::Span),
+                 (g, [zero, ot, oa, ob, os])| {
                     if let [z] = zero {
                         *z = MaybeUninit::new(0);
                     }
@@ -477,6 +483,7 @@ fn build_edges_in<const TRI: bool>(
     drop(list_t);
 
     let emitted = Instant::now();
+    crate::trace::between("topology: emit", listed, emitted);
     // Pass 4: each group's records moved down from its listings to follow
     // the previous groups' (records never outnumber twice the listings
     // before them, so a move only overwrites listings already moved or
@@ -546,6 +553,7 @@ fn build_edges_in<const TRI: bool>(
     e.a.shrink_to_fit();
     e.b.shrink_to_fit();
     e.opp_start.shrink_to_fit();
+    crate::trace::since("topology: compact", emitted);
     let times = PassTimes {
         count: counted - started,
         list: listed - counted,

@@ -758,6 +758,7 @@ fn sort_vertices<'w>(
         .par_chunks(part_len)
         .zip(ids.par_chunks_mut(part_len))
         .map(|(c, ids)| {
+            let _part = crate::trace::span("weld: sort (part)");
             let mut count = vec![0u32; buckets];
             for (c, ids) in c.chunks(VERTEX_BLOCK).zip(ids.chunks_mut(VERTEX_BLOCK)) {
                 wide.fill_ids(c, ids, &bucket);
@@ -808,6 +809,7 @@ fn sort_vertices<'w>(
         .zip(next)
         .enumerate()
         .for_each(|(part, ((c, ids), mut next))| {
+            let _part = crate::trace::span("weld: sort (part)");
             let out = &out;
             let first = part * part_len;
             for (i, (&p, &b)) in c.iter().zip(ids).enumerate() {
@@ -851,8 +853,12 @@ fn sort_vertices<'w>(
         .enumerate()
         .with_min_len(64)
         .map_init(
-            <(Vec<u128>, Vec<u32>)>::default,
-            |(scratch, counts), (b, g)| {
+            // (A split's span lasts as long as its scratch.)
+            || {
+                let part = crate::trace::span("weld: sort (part)");
+                (<(Vec<u128>, Vec<u32>)>::default(), part)
+            },
+            |((scratch, counts), _part), (b, g)| {
                 if g.len() > SMALL_SORT {
                     scratch.resize(g.len(), 0);
                     // (One bucket: no linear scale to take edges from.)
@@ -1017,6 +1023,7 @@ fn weld_passes(
     // 1. Sort all input vertices by position.
     let groups = sort_vertices(positions, words);
     times.sort = started.elapsed();
+    crate::trace::since("weld: sort", started);
     let step = Instant::now();
 
     // 2. Number the runs of equal positions: `run[i]` is input vertex i's
@@ -1048,9 +1055,9 @@ fn weld_passes(
         rest = tail;
         first_run += distinct as u32;
     }
-    jobs.into_par_iter()
-        .with_min_len(64)
-        .for_each(|(words, out, first_run)| {
+    jobs.into_par_iter().with_min_len(64).for_each_init(
+        || crate::trace::span("weld: numbering (part)"),
+        |_part, (words, out, first_run)| {
             // Branch-free: every word writes its run's position (the same
             // value for every word of a run; 16 bytes but for the group's
             // last run, see `write_position_padded`), and the run id steps
@@ -1088,7 +1095,8 @@ fn weld_passes(
                 // writes this slot.
                 unsafe { run_at.0.add(w as u32 as usize).write(first_run + r as u32) };
             }
-        });
+        },
+    );
     drop(groups);
     drop(own_words);
     // SAFETY: every run's position and every vertex's run were written
@@ -1099,6 +1107,7 @@ fn weld_passes(
     }
     debug_assert!(!run.contains(&UNWRITTEN));
     times.numbering = step.elapsed();
+    crate::trace::since("weld: numbering", step);
     let step = Instant::now();
 
     // 3. Triangles in run ids, one part of the input per thread; the
@@ -1141,6 +1150,7 @@ fn weld_passes(
         .zip(out.par_chunks_mut(3 * part_len))
         .enumerate()
         .map(|(part, (tris, out))| {
+            let _part = crate::trace::span("weld: triangles (part)");
             // The marks' pointer, `run` as a slice and each triangle's
             // corners in locals: a byte stored through a pointer may alias
             // anything, so with them read through `marks_at`, the captured
@@ -1206,6 +1216,7 @@ fn weld_passes(
     };
 
     times.triangles = step.elapsed();
+    crate::trace::since("weld: triangles", step);
     let step = Instant::now();
 
     // 4. Drop unused runs (those no kept triangle references) and renumber
@@ -1233,6 +1244,7 @@ fn weld_passes(
         }
     }
     times.unused = step.elapsed();
+    crate::trace::since("weld: unused", step);
 
     Welded {
         positions: out_positions,

@@ -7,55 +7,13 @@
 //! guess, the bytes must be those of a one-thread build, which writes no
 //! side block ahead (only the caps, from the soup).
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use svpack::build::{BuildConfig, build_file};
 use svpack::format;
 use svpack::format::Encoding;
 
-/// A closed torus of `n` × `n` cells (2 n² triangles, every edge on two),
-/// plus `pages` double-sided pages (a triangle and its reverse) on the
-/// edge between two vertices at the x where the vertex order puts them:
-/// `at` from 0 (first) to 1 (last). The edge then has 2 + 2·pages opposite
-/// vertices, every count even.
-fn torus(dir: &Path, n: usize, pages: usize, at: f64) -> PathBuf {
-    let mut s = String::new();
-    let p = |i: usize, j: usize| {
-        let (u, v) = (
-            std::f64::consts::TAU * i as f64 / n as f64,
-            std::f64::consts::TAU * j as f64 / n as f64,
-        );
-        let r = 3.0 + v.cos();
-        [r * u.cos(), r * u.sin(), v.sin()]
-    };
-    for j in 0..n {
-        for i in 0..n {
-            let q = p(i, j);
-            let _ = writeln!(s, "v {} {} {}", q[0] as f32, q[1] as f32, q[2] as f32);
-        }
-    }
-    let id = |i: usize, j: usize| (j % n) * n + (i % n) + 1;
-    for j in 0..n {
-        for i in 0..n {
-            let _ = writeln!(s, "f {} {} {}", id(i, j), id(i + 1, j), id(i + 1, j + 1));
-            let _ = writeln!(s, "f {} {} {}", id(i, j), id(i + 1, j + 1), id(i, j + 1));
-        }
-    }
-    // The grid edge (i, 0)–(i, 1) whose x is at the fraction `at` of the
-    // x range (x runs from −4 to 4 along i for j = 0).
-    let i = ((1.0 - at) * n as f64 / 2.0) as usize % n;
-    let mut apex = n * n;
-    for k in 0..pages {
-        let q = p(i, 0);
-        apex += 1;
-        let _ = writeln!(s, "v {} {} {}", q[0] as f32, q[1] as f32, 2.0 + k as f32);
-        let _ = writeln!(s, "f {} {} {apex}", id(i, 0), id(i, 1));
-        let _ = writeln!(s, "f {} {} {apex}", id(i, 1), id(i, 0));
-    }
-    let path = dir.join(format!("torus{pages}_{at}.obj"));
-    std::fs::write(&path, s).unwrap();
-    path
-}
+mod common;
+use common::torus;
 
 /// Builds `input` to `out` in a pool of `threads` threads; the summary.
 fn build(

@@ -118,7 +118,14 @@ const CONCURRENT_DIGEST_MIN: usize = 256 << 10;
 /// thread when the rayon pool the caller runs in has more than one, so
 /// `--threads 1` still means one core. The digest is the same either way.
 pub fn digest_while<T>(parts: &[&[u8]], work: impl FnOnce() -> T) -> ((u64, [u8; 32]), T) {
-    let hash = || InputDigest::of_parts(parts.iter().copied());
+    let hash = || {
+        let _digest = crate::trace::span("digest");
+        InputDigest::of_parts(parts.iter().copied())
+    };
+    let work = || {
+        let _parse = crate::trace::span("parse");
+        work()
+    };
     let total: usize = parts.iter().map(|p| p.len()).sum();
     if total < CONCURRENT_DIGEST_MIN || rayon::current_num_threads() < 2 {
         return (hash(), work());
@@ -172,6 +179,7 @@ pub(crate) fn with_digest_head<R>(first: &[u8], body: impl FnOnce(DigestHead<'_>
                 std::thread::Builder::new()
                     .name("svpack-sha256".into())
                     .spawn_scoped(scope, move || {
+                        let _digest = crate::trace::span("digest");
                         let mut digest = InputDigest::default();
                         let mut hashed = 0;
                         for block in first.chunks(HEAD_BLOCK) {
@@ -186,6 +194,7 @@ pub(crate) fn with_digest_head<R>(first: &[u8], body: impl FnOnce(DigestHead<'_>
                     .ok()
             })
             .flatten();
+        let _parse = crate::trace::span("parse");
         body(DigestHead {
             thread,
             first,
@@ -337,6 +346,7 @@ impl DigestSlices {
 
     /// The byte count and SHA-256 of everything, hashing what is left here.
     pub fn finish(&self) -> (u64, [u8; 32]) {
+        let _rest = crate::trace::span("digest: the rest");
         let mut pending = self.0.lock().unwrap_or_else(|e| e.into_inner());
         std::mem::replace(&mut *pending, PendingDigest::Done(0, [0; 32])).finish()
     }
