@@ -40,7 +40,7 @@ struct Log {
 /// One interval of one thread.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Event {
-    /// What the thread did (a stage, a pass, `fill`, `write`, ...).
+    /// What the thread did (a stage, a pass, `fill`, `file write`, ...).
     pub name: &'static str,
     /// The thread's number (see [`Trace::threads`]).
     pub thread: u32,
@@ -90,6 +90,8 @@ pub struct Recording(());
 impl Recording {
     /// Turns recording off and returns what was recorded.
     pub fn finish(self) -> Trace {
+        // (Taken once: dropping `self` would take again.)
+        std::mem::forget(self);
         take()
     }
 }
