@@ -140,7 +140,7 @@ pub fn since_n(name: &'static str, n: u64, start: Instant) {
 }
 
 /// The time now if a recording is on: the start to pass to [`since`] or
-/// [`Span::end`] (taking it costs nothing when off).
+/// [`since_n`] once the interval ends (nothing is read when off).
 #[inline]
 pub fn now() -> Option<Instant> {
     on().then(Instant::now)
