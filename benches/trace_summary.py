@@ -140,7 +140,9 @@ def summary(path, stage=None):
             if t2 != t:
                 overlap += min(e, e2) - s2
     total = sum(e - s for s, e, _t in writes)
-    gaps = (writes[-1][1] - writes[0][0]) - union_length([(s, e) for s, e, _ in writes]) if writes else 0.0
+    # (The last write to end, not the last to start.)
+    last_write = max((e for _s, e, _t in writes), default=None)
+    gaps = (last_write - writes[0][0]) - union_length([(s, e) for s, e, _ in writes]) if writes else 0.0
     return {
         "build_ms": everything[1] - everything[0],
         "window": stage or "build",
@@ -152,7 +154,7 @@ def summary(path, stage=None):
             "total_ms": total,
             "overlapping_ms": overlap,
             "first_ms": writes[0][0] - everything[0] if writes else None,
-            "last_end_ms": writes[-1][1] - everything[0] if writes else None,
+            "last_end_ms": last_write - everything[0] if writes else None,
             "none_writing_between_ms": gaps,
         },
     }
