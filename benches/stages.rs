@@ -275,7 +275,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
     g.bench_function(format!("file/{n}"), |b| {
         b.iter_batched(
             || fresh(&out),
-            |()| format::write_file(&out, m.header.clone(), &[payload(m)], false).unwrap(),
+            |()| format::write_file(&out, m.header.clone(), &[payload(m)], None).unwrap(),
             BatchSize::PerIteration,
         )
     });
@@ -313,7 +313,7 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
                     caps: &l.caps,
                     buckets: l.buckets.iter().map(|b| b.data.as_slice()).collect(),
                 };
-                format::write_file(&whole_out, m.header.clone(), &[mesh], false).unwrap()
+                format::write_file(&whole_out, m.header.clone(), &[mesh], None).unwrap()
             },
             BatchSize::PerIteration,
         )

@@ -847,20 +847,11 @@ pub fn to_svg(r: &AccuracyReport) -> std::result::Result<String, String> {
 /// Writes `accuracy.md`, `accuracy.json` and `accuracy.svg` into `out`
 /// (each atomically). Returns the three paths.
 pub fn write_outputs(r: &AccuracyReport, out: &Path) -> Result<[PathBuf; 3]> {
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let md = out.join("accuracy.md");
-    let json = out.join("accuracy.json");
-    let svg = out.join("accuracy.svg");
-    let write = |p: &Path, data: &str| -> Result<()> {
-        let tmp = p.with_extension("tmp");
-        std::fs::write(&tmp, data).map_err(|e| Error::io(&tmp, e))?;
-        std::fs::rename(&tmp, p).map_err(|e| Error::io(p, e))
-    };
-    write(&md, &to_markdown(r))?;
-    write(
-        &json,
+    crate::report::write_bench_files(
+        out,
+        "accuracy",
+        &to_markdown(r),
         &serde_json::to_string_pretty(r).map_err(|e| Error::Other(e.to_string()))?,
-    )?;
-    write(&svg, &to_svg(r).map_err(Error::Other)?)?;
-    Ok([md, json, svg])
+        &to_svg(r).map_err(Error::Other)?,
+    )
 }

@@ -18,8 +18,10 @@ use std::time::{Duration, Instant};
 pub struct BuildConfig {
     /// K: largest opposite-vertex count per side instance (1..=13).
     pub max_mult: u32,
-    /// Wrap the output in a zstd frame.
-    pub compress: bool,
+    /// Wrap the output in a zstd frame at this level (one of
+    /// [`format::ZSTD_LEVELS`]; [`format::ZSTD_LEVEL`] is `--compress`'s),
+    /// or write it plain.
+    pub compress: Option<i32>,
     /// How positions are stored (f32, or 16-bit quantised over the mesh bounds).
     pub positions: Encoding,
 }
@@ -28,7 +30,7 @@ impl Default for BuildConfig {
     fn default() -> Self {
         BuildConfig {
             max_mult: layout::DEFAULT_MAX_MULT,
-            compress: false,
+            compress: None,
             positions: Encoding::F32,
         }
     }
@@ -487,7 +489,7 @@ fn build_file_stages(
         },
         options: BuildOptions {
             max_mult: cfg.max_mult,
-            compress: cfg.compress,
+            compress: cfg.compress.is_some(),
             positions: cfg.positions.code(),
         },
         bounds_min: [0.0; 3],
@@ -517,7 +519,7 @@ fn build_file_stages(
         },
         ..mesh_header.clone()
     };
-    let ahead_wanted = !cfg.compress
+    let ahead_wanted = cfg.compress.is_none()
         && format::header_room(&Header {
             meshes: vec![early.clone()],
             ..header.clone()
@@ -597,7 +599,7 @@ fn build_file_stages(
     // buffers; an uncompressed one is filled block by block at its offsets.
     let layout = cfg
         .compress
-        .then(|| layout::layout_planned(&welded, &edges, &plan));
+        .map(|level| (level, layout::layout_planned(&welded, &edges, &plan)));
     timings.layout += ms(i);
     crate::trace::since("layout", i);
     let stats = mesh_stats(&soup, input_triangles, &welded, &plan);
@@ -629,7 +631,7 @@ fn build_file_stages(
     stage("write");
     let write_start = Instant::now();
     let (header, file_bytes) = match &layout {
-        Some(layout) => {
+        Some((level, layout)) => {
             let mut header = header;
             (header.input.bytes, header.input.sha256) = digest.finish();
             let mesh = MeshPayload {
@@ -637,7 +639,7 @@ fn build_file_stages(
                 caps: &layout.caps,
                 buckets: layout.buckets.iter().map(|b| b.data.as_slice()).collect(),
             };
-            format::write_file(output, header, &[mesh], true)?
+            format::write_file(output, header, &[mesh], Some(*level))?
         }
         None => {
             let records = plan.records(&welded, &edges);

@@ -39,8 +39,15 @@ pub const HEADER_LIMIT: usize = 16 << 20;
 pub const DECOMPRESSED_LIMIT: u64 = 16 << 30;
 /// zstd frame magic (little-endian 0xFD2FB528).
 pub const ZSTD_MAGIC: [u8; 4] = [0x28, 0xB5, 0x2F, 0xFD];
-/// zstd level used by `--compress`: fixed so output is reproducible.
+/// zstd level of `--compress` when no `--compress-level` is given. The
+/// frame is a function of the container bytes and the level alone (any
+/// thread count), so a given level's output is reproducible.
 pub const ZSTD_LEVEL: i32 = 9;
+
+/// Levels `--compress-level` accepts: zstd's 1 (fastest) to 22 (smallest).
+/// zstd's negative "fast" levels and its 0 ("the library's default", which
+/// would change with the library) are left out.
+pub const ZSTD_LEVELS: std::ops::RangeInclusive<i32> = 1..=22;
 
 /// zstd worker threads for one frame: as many as the current rayon pool
 /// has threads, and never 0. zstd with workers cuts the input into jobs of
@@ -703,23 +710,15 @@ pub fn write_file(
     path: &Path,
     header: Header,
     meshes: &[MeshPayload<'_>],
-    compress: bool,
+    compress: Option<i32>,
 ) -> Result<(Header, u64)> {
     let tmp = temp_beside(path)?;
     let file = tmp.as_file().try_clone().map_err(|e| Error::io(path, e))?;
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
-    let header = if compress {
+    let header = if let Some(level) = compress {
         let (_, probe) = finalize_header(header.clone(), meshes)?;
         let mut enc =
-            zstd::stream::Encoder::new(&mut w, ZSTD_LEVEL).map_err(|e| Error::io(path, e))?;
-        enc.multithread(zstd_workers())
-            .map_err(|e| Error::io(path, e))?;
-        enc.set_parameter(zstd::zstd_safe::CParameter::JobSize(ZSTD_JOB_BYTES))
-            .map_err(|e| Error::io(path, e))?;
-        enc.include_contentsize(true)
-            .map_err(|e| Error::io(path, e))?;
-        enc.set_pledged_src_size(Some(container_len(&probe)))
-            .map_err(|e| Error::io(path, e))?;
+            zstd_encoder(&mut w, level, container_len(&probe)).map_err(|e| Error::io(path, e))?;
         let h = encode_to(&mut enc, header, meshes).map_err(|e| with_path(e, path))?;
         enc.finish().map_err(|e| Error::io(path, e))?;
         h
@@ -1730,19 +1729,66 @@ fn validate_layout(
     Ok(())
 }
 
-/// Bytes the file takes as one zstd frame at [`ZSTD_LEVEL`] (its size on disk
-/// if it already is one).
-pub fn zstd_size(file: &SvpkFile) -> u64 {
+/// The zstd encoder of a compressed file: `level`, one worker per thread
+/// of the current rayon pool, [`ZSTD_JOB_BYTES`] jobs, and the content size
+/// (`len`, which the stream must then be) in the frame header. Every frame
+/// svpack writes or sizes comes from here, so that `inspect`'s size at a
+/// level is the size `build --compress-level` writes.
+fn zstd_encoder<W: Write>(
+    w: W,
+    level: i32,
+    len: u64,
+) -> std::io::Result<zstd::Encoder<'static, W>> {
+    let mut enc = zstd::stream::Encoder::new(w, level)?;
+    enc.multithread(zstd_workers())?;
+    enc.set_parameter(zstd::zstd_safe::CParameter::JobSize(ZSTD_JOB_BYTES))?;
+    enc.include_contentsize(true)?;
+    enc.set_pledged_src_size(Some(len))?;
+    Ok(enc)
+}
+
+/// The zstd frame `build --compress-level level` writes for the file read
+/// as `file`, on the current rayon pool's threads: its container with the
+/// header's `--compress` record set (and the header's checksum to match),
+/// the one difference between a compressed build's container and a plain
+/// one's, so the frame is byte for byte the one the build writes.
+pub fn compressed_frame(file: &SvpkFile, level: i32) -> Result<Vec<u8>> {
+    let bytes = &file.bytes[..];
+    let header_len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+    let mut header = file.header.clone();
+    header.options.compress = true;
+    let hbytes = encode_header(&header)?;
+    if hbytes.len() != header_len {
+        // Fixed-width fields: setting a flag cannot change the length.
+        return Err(Error::Other(format!(
+            "the header re-encodes to {} bytes, not {header_len}",
+            hbytes.len()
+        )));
+    }
+    let io = |e: std::io::Error| Error::Other(format!("zstd: {e}"));
+    // A frame is rarely above a third of its input here (`bench
+    // --compression`); the vector grows if it is.
+    let mut enc = zstd_encoder(
+        Vec::with_capacity(bytes.len() / 3),
+        level,
+        bytes.len() as u64,
+    )
+    .map_err(io)?;
+    enc.write_all(&preamble(&hbytes)).map_err(io)?;
+    enc.write_all(&hbytes).map_err(io)?;
+    enc.write_all(&bytes[PREAMBLE_LEN + header_len..])
+        .map_err(io)?;
+    enc.finish().map_err(io)
+}
+
+/// Bytes the file takes as the zstd frame `build --compress-level level`
+/// writes ([`compressed_frame`]; its size on disk if it already is a frame,
+/// whatever its level).
+pub fn zstd_size(file: &SvpkFile, level: i32) -> u64 {
     if file.compressed {
         return file.file_bytes;
     }
-    let compress = || -> std::io::Result<u64> {
-        let mut c = zstd::bulk::Compressor::new(ZSTD_LEVEL)?;
-        c.set_parameter(zstd::zstd_safe::CParameter::NbWorkers(zstd_workers()))?;
-        c.set_parameter(zstd::zstd_safe::CParameter::JobSize(ZSTD_JOB_BYTES))?;
-        Ok(c.compress(&file.bytes)?.len() as u64)
-    };
-    compress().unwrap_or(file.file_bytes)
+    compressed_frame(file, level).map_or(file.file_bytes, |f| f.len() as u64)
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 pub mod accuracy;
 pub mod alloc;
 pub mod build;
+pub mod compression;
 pub mod error;
 pub mod evaluate;
 pub mod evaluate_indexed;

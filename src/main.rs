@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use svpack::build::BuildConfig;
+use svpack::format::{ZSTD_LEVEL, ZSTD_LEVELS};
 use svpack::layout::{DEFAULT_MAX_MULT, MAX_MAX_MULT};
 use svpack::report::Summary;
 
@@ -126,9 +127,17 @@ enum Command {
         #[arg(long, default_value_t = DEFAULT_MAX_MULT,
               value_parser = clap::value_parser!(u32).range(1..=MAX_MAX_MULT as i64))]
         max_mult: u32,
-        /// Wrap the file in a zstd frame (readers detect it).
+        /// Wrap the file in a standard zstd frame (readers detect it), at
+        /// level 9 unless --compress-level gives another.
         #[arg(long)]
         compress: bool,
+        /// zstd level of the frame, 1 (fastest) to 22 (smallest); implies
+        /// --compress. The file inside the frame is the same at every level.
+        /// `svpack bench --compression` measures each level's size and speed
+        /// on your models.
+        #[arg(long, value_name = "LEVEL", allow_negative_numbers = true,
+              value_parser = clap::value_parser!(i32).range(*ZSTD_LEVELS.start() as i64..=*ZSTD_LEVELS.end() as i64))]
+        compress_level: Option<i32>,
         /// Position encoding: `f32` (16 bytes per vec4, exact input
         /// positions) or `unorm16` (8 bytes per vec4: positions quantised to
         /// 16 bits over the mesh bounds; format-spec §4.5). Quantisation moves
@@ -164,6 +173,11 @@ enum Command {
         /// Print the summary as JSON on stdout.
         #[arg(long)]
         json: bool,
+        /// zstd level of the compressed size reported for a plain file (the
+        /// size `build --compress-level LEVEL` writes).
+        #[arg(long, value_name = "LEVEL", default_value_t = ZSTD_LEVEL, allow_negative_numbers = true,
+              value_parser = clap::value_parser!(i32).range(*ZSTD_LEVELS.start() as i64..=*ZSTD_LEVELS.end() as i64))]
+        compress_level: i32,
     },
     /// Check assets for problems that matter to shadow geometry (codes in
     /// README). Exit 3 when a denied finding is present; error-severity
@@ -195,11 +209,19 @@ enum Command {
     /// strategies (Kim 2008, Pečiva 2013, reference edge f32 and f64, exact)
     /// and of the f32 and unorm16 encodings, on the built-in hard-case suite
     /// and INPUTS; writes accuracy.md, accuracy.json and accuracy.svg to --out.
+    /// `--compression`: size against speed of the zstd levels of `build
+    /// --compress-level` on INPUTS (f32 and unorm16); writes compression.md,
+    /// compression.json and compression.svg to --out.
+    #[command(group(clap::ArgGroup::new("which").required(true).args(["accuracy", "compression"])))]
     Bench {
-        /// Run the accuracy benchmark (the only one so far).
-        #[arg(long, required = true)]
+        /// Run the accuracy benchmark.
+        #[arg(long)]
         accuracy: bool,
-        /// Model files (.obj, .gltf, .glb) besides the hard-case suite.
+        /// Run the compression benchmark (needs INPUTS).
+        #[arg(long, requires = "inputs")]
+        compression: bool,
+        /// Model files (.obj, .gltf, .glb); for --accuracy, besides the
+        /// hard-case suite.
         inputs: Vec<PathBuf>,
         /// Output directory (created if missing).
         #[arg(long)]
@@ -216,6 +238,13 @@ enum Command {
         /// Leave out the built-in hard-case suite.
         #[arg(long)]
         no_hard_cases: bool,
+        /// zstd levels measured by --compression, comma-separated.
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true, default_values_t = svpack::compression::CompressionConfig::default().levels,
+              value_parser = clap::value_parser!(i32).range(*ZSTD_LEVELS.start() as i64..=*ZSTD_LEVELS.end() as i64))]
+        levels: Vec<i32>,
+        /// Timing runs per measurement for --compression (the fastest counts).
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+        reps: u64,
     },
     /// Replay a .svpk file on the CPU: check the sides/caps bijection and,
     /// per light, that the emitted shadow volume is closed. Exit 2 on failure.
@@ -528,6 +557,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             jobs,
             max_mult,
             compress,
+            compress_level,
             positions,
             json,
             verify,
@@ -535,6 +565,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             trace,
             lights,
         } => {
+            let compress = compress_level.or(compress.then_some(ZSTD_LEVEL));
             let cfg = BuildConfig {
                 max_mult,
                 compress,
@@ -579,7 +610,9 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                         for w in &out.warnings {
                             eprintln!("warning: {}: {w}", input.display());
                         }
-                        let mut s = Summary::from_header(&out.header, out.file_bytes, compress);
+                        let mut s =
+                            Summary::from_header(&out.header, out.file_bytes, compress.is_some());
+                        s.zstd_level = compress;
                         s.time_ms = Some(out.elapsed.as_secs_f64() * 1e3);
                         if timings {
                             s.timings_ms = Some(out.timings);
@@ -636,10 +669,15 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                 return Ok(Outcome::ValidationFailed);
             }
         }
-        Command::Inspect { file, json } => {
+        Command::Inspect {
+            file,
+            json,
+            compress_level,
+        } => {
             let f = svpack::format::read_file(&file)?;
             let mut s = Summary::from_header(&f.header, f.file_bytes, f.compressed);
-            s.zstd_bytes = Some(svpack::format::zstd_size(&f));
+            s.zstd_bytes = Some(svpack::format::zstd_size(&f, compress_level));
+            s.zstd_level = (!f.compressed).then_some(compress_level);
             if !json {
                 println!(
                     "{}: svpk {}.{}, written by {}",
@@ -682,33 +720,48 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
         }
         Command::Bench {
             accuracy: _,
+            compression,
             inputs,
             out,
             lights,
             samples,
             seed,
             no_hard_cases,
+            levels,
+            reps,
         } => {
-            let cfg = svpack::accuracy::AccuracyConfig {
-                lights,
-                samples,
-                seed,
-                hard_cases: !no_hard_cases,
-                ..Default::default()
-            };
             let work = tempfile::tempdir().map_err(|e| svpack::error::Error::io(&out, e))?;
-            let rep =
-                svpack::accuracy::run(&inputs, &cfg, work.path(), &mut |line| eprintln!("{line}"))?;
-            let paths = svpack::accuracy::write_outputs(&rep, &out)?;
-            print!("{}", svpack::accuracy::to_markdown(&rep));
+            let progress = &mut |line: &str| eprintln!("{line}");
+            let (md, paths, seconds, failed) = if compression {
+                let cfg = svpack::compression::CompressionConfig {
+                    levels,
+                    reps: reps as usize,
+                };
+                let rep = svpack::compression::run(&inputs, &cfg, work.path(), progress)?;
+                let paths = svpack::compression::write_outputs(&rep, &out)?;
+                let md = svpack::compression::to_markdown(&rep);
+                (md, paths, rep.seconds, rep.failed.len())
+            } else {
+                let cfg = svpack::accuracy::AccuracyConfig {
+                    lights,
+                    samples,
+                    seed,
+                    hard_cases: !no_hard_cases,
+                    ..Default::default()
+                };
+                let rep = svpack::accuracy::run(&inputs, &cfg, work.path(), progress)?;
+                let paths = svpack::accuracy::write_outputs(&rep, &out)?;
+                let md = svpack::accuracy::to_markdown(&rep);
+                (md, paths, rep.seconds, rep.failed.len())
+            };
+            print!("{md}");
             for p in paths {
                 eprintln!("wrote {}", p.display());
             }
-            eprintln!("{:.1} s", rep.seconds);
-            if !rep.failed.is_empty() {
+            eprintln!("{seconds:.1} s");
+            if failed > 0 {
                 return Err(svpack::error::Error::Other(format!(
-                    "{} inputs could not be built",
-                    rep.failed.len()
+                    "{failed} inputs could not be built"
                 )));
             }
         }

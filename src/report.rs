@@ -3,10 +3,12 @@
 //! Both commands derive the summary from the header alone, so what `inspect`
 //! prints for a file is exactly what `build` printed when writing it.
 
+use crate::error::{Error, Result};
 use crate::format::{Header, MeshStats};
 use crate::layout::paper_bytes;
 use serde::Serialize;
 use std::fmt::Write;
+use std::path::{Path, PathBuf};
 
 /// Per-bucket figures.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -81,10 +83,16 @@ pub struct Summary {
     /// Partitioned Shadow Volumes' GPU footprint for the same triangles:
     /// 128·(t + 1) bytes.
     pub psv_bytes: u64,
-    /// Size of the container as one zstd frame at `--compress`'s level
-    /// (inspect and report only; equals `file_bytes` for compressed files).
+    /// Size of the container as the zstd frame `build --compress-level
+    /// zstd_level` writes (inspect only; equals `file_bytes` for compressed
+    /// files).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub zstd_bytes: Option<u64>,
+    /// The zstd level of the frame: `build`'s for a compressed build,
+    /// `inspect`'s for `zstd_bytes` of a plain file (a frame does not record
+    /// its level, so a compressed file read back has none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zstd_level: Option<i32>,
     /// Per mesh.
     pub meshes: Vec<MeshSummary>,
     /// Lower bounds.
@@ -169,6 +177,7 @@ impl Summary {
             paper_bytes: paper_bytes(stats.edges, stats.triangles, stats.max_fan),
             psv_bytes: psv_bytes(stats.triangles),
             zstd_bytes: None,
+            zstd_level: None,
             meshes: h
                 .meshes
                 .iter()
@@ -267,7 +276,9 @@ impl Summary {
             human_bytes(self.file_bytes),
             if self.compressed {
                 format!(
-                    " (zstd; {} uncompressed)",
+                    " (zstd{}; {} uncompressed)",
+                    self.zstd_level
+                        .map_or(String::new(), |l| format!(" level {l}")),
                     human_bytes(self.container_bytes)
                 )
             } else {
@@ -320,6 +331,9 @@ impl Summary {
         );
         if let Some(z) = self.zstd_bytes {
             let _ = write!(o, "; zstd-compressed {}", human_bytes(z));
+            if let (false, Some(l)) = (self.compressed, self.zstd_level) {
+                let _ = write!(o, " at level {l}");
+            }
         }
         o.push('\n');
         o
@@ -426,4 +440,24 @@ pub fn report_table(rows: &[(std::path::PathBuf, crate::error::Result<Summary>)]
         rows.len()
     );
     o
+}
+
+/// Writes a benchmark's `STEM.md`, `STEM.json` and `STEM.svg` into `out`
+/// (created if missing), each through a temp file renamed into place, so
+/// that a failed run leaves the previous files whole. Returns the paths.
+pub fn write_bench_files(
+    out: &Path,
+    stem: &str,
+    md: &str,
+    json: &str,
+    svg: &str,
+) -> Result<[PathBuf; 3]> {
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let paths = ["md", "json", "svg"].map(|ext| out.join(format!("{stem}.{ext}")));
+    for (p, data) in paths.iter().zip([md, json, svg]) {
+        let tmp = p.with_extension("tmp");
+        std::fs::write(&tmp, data).map_err(|e| Error::io(&tmp, e))?;
+        std::fs::rename(&tmp, p).map_err(|e| Error::io(p, e))?;
+    }
+    Ok(paths)
 }

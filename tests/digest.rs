@@ -33,7 +33,7 @@ fn built_digest(input: &Path, out: &Path, threads: usize, compress: bool) -> (u6
         .build()
         .unwrap();
     let cfg = BuildConfig {
-        compress,
+        compress: compress.then_some(svpack::format::ZSTD_LEVEL),
         ..BuildConfig::default()
     };
     pool.install(|| build_file(input, out, &cfg))

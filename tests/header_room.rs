@@ -104,7 +104,7 @@ fn large_files_keep_room_and_are_the_same_bytes_on_any_thread_count() {
                 &zout,
                 1,
                 &BuildConfig {
-                    compress: true,
+                    compress: Some(format::ZSTD_LEVEL),
                     ..cfg
                 },
             );

@@ -156,7 +156,7 @@ fn check(input: &Path, dir: &Path, cfg: BuildConfig, threads: usize) {
             input,
             &whole,
             &BuildConfig {
-                compress: true,
+                compress: Some(svpack::format::ZSTD_LEVEL),
                 ..cfg
             },
         )
@@ -192,7 +192,7 @@ fn streamed_files_equal_whole_buffer_files() {
                 for threads in [1, 3] {
                     let cfg = BuildConfig {
                         max_mult,
-                        compress: false,
+                        compress: None,
                         positions,
                     };
                     check(input, tmp.path(), cfg, threads);
