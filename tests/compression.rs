@@ -172,8 +172,8 @@ fn levels_outside_the_range_are_refused() {
     assert!(!tmp.path().join("b").exists());
 }
 
-/// `bench --compression`: both encodings per input, each level asked for,
-/// and sizes that are the sizes `build --compress-level` writes (the f32
+/// `bench --compression`: both encodings per input, each level asked for
+/// once, and sizes that are the sizes `build --compress-level` writes (the f32
 /// rows; the plain size is the plain build's); the three files. Caught: the
 /// bench compressing with the default level whatever `--levels` said.
 #[test]
@@ -186,7 +186,7 @@ fn the_compression_bench_reports_the_sizes_build_writes() {
             "bench",
             "--compression",
             "--levels",
-            "1,19",
+            "1,19,1",
             "--reps",
             "1",
             "--out",
