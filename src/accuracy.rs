@@ -847,11 +847,5 @@ pub fn to_svg(r: &AccuracyReport) -> std::result::Result<String, String> {
 /// Writes `accuracy.md`, `accuracy.json` and `accuracy.svg` into `out`
 /// (each atomically). Returns the three paths.
 pub fn write_outputs(r: &AccuracyReport, out: &Path) -> Result<[PathBuf; 3]> {
-    crate::report::write_bench_files(
-        out,
-        "accuracy",
-        &to_markdown(r),
-        &serde_json::to_string_pretty(r).map_err(|e| Error::Other(e.to_string()))?,
-        &to_svg(r).map_err(Error::Other)?,
-    )
+    crate::report::write_bench_files(out, "accuracy", r, &to_markdown(r), to_svg(r))
 }

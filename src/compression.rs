@@ -393,13 +393,7 @@ pub fn to_svg(r: &CompressionReport) -> std::result::Result<String, String> {
 /// Writes `compression.md`, `compression.json` and `compression.svg` into
 /// `out` (each atomically). Returns the three paths.
 pub fn write_outputs(r: &CompressionReport, out: &Path) -> Result<[PathBuf; 3]> {
-    crate::report::write_bench_files(
-        out,
-        "compression",
-        &to_markdown(r),
-        &serde_json::to_string_pretty(r).map_err(|e| Error::Other(e.to_string()))?,
-        &to_svg(r).map_err(Error::Other)?,
-    )
+    crate::report::write_bench_files(out, "compression", r, &to_markdown(r), to_svg(r))
 }
 
 #[cfg(test)]

@@ -226,16 +226,16 @@ enum Command {
         /// Output directory (created if missing).
         #[arg(long)]
         out: PathBuf,
-        /// Generated lights per input.
+        /// Generated lights per input (--accuracy).
         #[arg(long, default_value_t = 16)]
         lights: usize,
-        /// Sample points per input for the shadow-truth checks.
+        /// Sample points per input for the shadow-truth checks (--accuracy).
         #[arg(long, default_value_t = 64)]
         samples: usize,
-        /// Seed for lights and samples.
+        /// Seed for lights and samples (--accuracy).
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Leave out the built-in hard-case suite.
+        /// Leave out the built-in hard-case suite (--accuracy).
         #[arg(long)]
         no_hard_cases: bool,
         /// zstd levels measured by --compression, comma-separated.

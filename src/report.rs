@@ -442,16 +442,20 @@ pub fn report_table(rows: &[(std::path::PathBuf, crate::error::Result<Summary>)]
     o
 }
 
-/// Writes a benchmark's `STEM.md`, `STEM.json` and `STEM.svg` into `out`
-/// (created if missing), each through a temp file renamed into place, so
-/// that a failed run leaves the previous files whole. Returns the paths.
+/// Writes a benchmark's `STEM.md`, `STEM.json` (`report`, pretty-printed)
+/// and `STEM.svg` into `out` (created if missing), each through a temp
+/// file renamed into place, so that a failed run leaves the previous files
+/// whole. Returns the paths.
 pub fn write_bench_files(
     out: &Path,
     stem: &str,
+    report: &impl Serialize,
     md: &str,
-    json: &str,
-    svg: &str,
+    svg: std::result::Result<String, String>,
 ) -> Result<[PathBuf; 3]> {
+    let json = serde_json::to_string_pretty(report).map_err(|e| Error::Other(e.to_string()))?;
+    let svg = svg.map_err(Error::Other)?;
+    let (json, svg) = (json.as_str(), svg.as_str());
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let paths = ["md", "json", "svg"].map(|ext| out.join(format!("{stem}.{ext}")));
     for (p, data) in paths.iter().zip([md, json, svg]) {

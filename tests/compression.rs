@@ -25,6 +25,17 @@ fn build(dir: &Path, input: &Path, name: &str, args: &[&str]) -> (PathBuf, Value
     (out, serde_json::from_slice(&o.stdout).unwrap())
 }
 
+/// Bytes of the file `build --compress-level level` writes for `input`.
+fn frame_len(dir: &Path, input: &Path, level: &str) -> u64 {
+    let (frame, _) = build(
+        dir,
+        input,
+        &format!("l{level}.svpk"),
+        &["--compress-level", level],
+    );
+    std::fs::metadata(&frame).unwrap().len()
+}
+
 /// Each level writes its own frame, the same bytes for one thread or two;
 /// `--compress` alone is level 9; every frame holds the same container;
 /// the summary names the level. Caught: the level ignored (every frame
@@ -99,16 +110,11 @@ fn inspect_sizes_the_frame_of_its_level() {
         serde_json::from_slice(&o.stdout).unwrap()
     };
     for level in ["1", "9", "19"] {
-        let (frame, _) = build(
-            tmp.path(),
-            &input,
-            &format!("l{level}.svpk"),
-            &["--compress-level", level],
-        );
-        let written = std::fs::metadata(&frame).unwrap().len();
+        let written = frame_len(tmp.path(), &input, level);
         let j = inspect(&plain, &["--compress-level", level]);
         assert_eq!(j["zstd_bytes"].as_u64().unwrap(), written, "level {level}");
         assert_eq!(j["zstd_level"].to_string(), level);
+        let frame = tmp.path().join(format!("l{level}.svpk"));
         let back = inspect(&frame, &["--compress-level", "1"]);
         assert_eq!(back["zstd_bytes"].as_u64().unwrap(), written);
         assert!(back.get("zstd_level").is_none(), "{back}");
@@ -226,13 +232,7 @@ fn the_compression_bench_reports_the_sizes_build_writes() {
         }
     }
     for (i, level) in ["1", "19"].iter().enumerate() {
-        let (frame, _) = build(
-            tmp.path(),
-            &input,
-            &format!("l{level}.svpk"),
-            &["--compress-level", level],
-        );
-        let written = std::fs::metadata(&frame).unwrap().len();
+        let written = frame_len(tmp.path(), &input, level);
         let reported = f32_row["levels"][i]["bytes"].as_u64().unwrap();
         assert_eq!(reported, written, "level {level}");
     }
