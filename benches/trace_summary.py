@@ -13,7 +13,7 @@ Prints:
   emit pass that waits for them), and the thread's idle time between the
   first stage's start and the last stage's end (with `--stage`, within
   that stage alone: the first interval of that name);
-- the copies into the page cache (`write`): how many, their total, how
+- the copies into the page cache (`file write`): how many, their total, how
   long two overlapped (the kernel serialises writes into one file, so
   about none), and how long no thread wrote between the first write and
   the last one.

@@ -1752,18 +1752,33 @@ fn zstd_encoder<W: Write>(
 /// header's `--compress` record set (and the header's checksum to match),
 /// the one difference between a compressed build's container and a plain
 /// one's, so the frame is byte for byte the one the build writes.
+///
+/// The record is set by changing its one byte in the file's own header
+/// bytes, not by encoding the decoded header again: a file of an earlier
+/// minor version (2.0 has no room count) would come out as this
+/// version's, longer, and its offsets would no longer hold (`inspect`
+/// then reported such a file's own size as its frame's).
 pub fn compressed_frame(file: &SvpkFile, level: i32) -> Result<Vec<u8>> {
     let bytes = &file.bytes[..];
     let header_len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
-    let mut header = file.header.clone();
-    header.options.compress = true;
-    let hbytes = encode_header(&header)?;
-    if hbytes.len() != header_len {
-        // Fixed-width fields: setting a flag cannot change the length.
-        return Err(Error::Other(format!(
-            "the header re-encodes to {} bytes, not {header_len}",
-            hbytes.len()
-        )));
+    let mut hbytes = bytes[PREAMBLE_LEN..PREAMBLE_LEN + header_len].to_vec();
+    if !file.header.options.compress {
+        // Where the record's byte is: the one byte two encodings differing
+        // only in it differ by. The fields before it are the same in every
+        // minor version (fields are only ever appended).
+        let mut header = file.header.clone();
+        let plain = encode_header(&header)?;
+        header.options.compress = true;
+        let set = encode_header(&header)?;
+        let at = plain.iter().zip(&set).position(|(a, b)| a != b);
+        match at {
+            Some(at) if at < header_len && hbytes[at] == plain[at] => hbytes[at] = set[at],
+            _ => {
+                return Err(Error::Other(
+                    "the header's --compress record is not where it should be".into(),
+                ));
+            }
+        }
     }
     let io = |e: std::io::Error| Error::Other(format!("zstd: {e}"));
     // A frame is rarely above a third of its input here (`bench
@@ -1774,7 +1789,11 @@ pub fn compressed_frame(file: &SvpkFile, level: i32) -> Result<Vec<u8>> {
         bytes.len() as u64,
     )
     .map_err(io)?;
-    enc.write_all(&preamble(&hbytes)).map_err(io)?;
+    // The file's own preamble (its minor version too), the header's
+    // checksum redone.
+    let mut pre = bytes[..PREAMBLE_LEN].to_vec();
+    pre[16..20].copy_from_slice(&crc32fast::hash(&hbytes).to_le_bytes());
+    enc.write_all(&pre).map_err(io)?;
     enc.write_all(&hbytes).map_err(io)?;
     enc.write_all(&bytes[PREAMBLE_LEN + header_len..])
         .map_err(io)?;

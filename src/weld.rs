@@ -1188,7 +1188,7 @@ fn weld_passes(
         })
         .collect();
     let mut kept_triangles = 0;
-    let _move = crate::trace::span("weld: move");
+    let moving = crate::trace::span("weld: move");
     for (part, &(kept, _)) in renamed.iter().enumerate() {
         let from = part * part_len;
         if from != kept_triangles {
@@ -1196,7 +1196,7 @@ fn weld_passes(
         }
         kept_triangles += kept;
     }
-    drop(_move);
+    moving.end();
     // SAFETY: the parts wrote their kept triangles, now the first
     // `kept_triangles` in order.
     unsafe { triangles.set_len(3 * kept_triangles) };

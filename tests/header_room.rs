@@ -220,6 +220,17 @@ fn readers_check_the_room_and_read_2_0_files() {
     assert_eq!(old.version_minor, 0);
     assert_eq!(old.header.reserved, 0);
     assert_eq!(old.header.meshes[0].stats, f.header.meshes[0].stats);
+    // Its zstd frame (`inspect`'s size) is the same 2.0 file with the
+    // header's `--compress` record set, not a re-encoding as 2.1.
+    let frame = format::compressed_frame(&old, 3).unwrap();
+    assert_eq!(format::zstd_size(&old, 3), frame.len() as u64);
+    let inner = zstd::decode_all(&frame[..]).unwrap();
+    assert_eq!(inner.len(), v20.len());
+    let back = format::decode(&bad, inner.clone()).unwrap();
+    assert_eq!(back.version_minor, 0);
+    assert!(back.header.options.compress);
+    let differ = (0..v20.len()).filter(|&i| inner[i] != v20[i]).count();
+    assert!((1..=5).contains(&differ), "{differ} bytes differ");
     // And a 2.0 file with a room field is one with trailing bytes.
     let mut b = v21.clone();
     b[10..12].copy_from_slice(&0u16.to_le_bytes());
