@@ -19,6 +19,7 @@ pub mod layout;
 pub mod lint;
 pub mod load;
 pub mod multiplicity;
+pub mod parallel;
 mod pool;
 mod position_index;
 pub mod quantize;

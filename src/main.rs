@@ -211,8 +211,12 @@ enum Command {
     /// and INPUTS; writes accuracy.md, accuracy.json and accuracy.svg to --out.
     /// `--compression`: size against speed of the zstd levels of `build
     /// --compress-level` on INPUTS (f32 and unorm16); writes compression.md,
-    /// compression.json and compression.svg to --out.
-    #[command(group(clap::ArgGroup::new("which").required(true).args(["accuracy", "compression"])))]
+    /// compression.json and compression.svg to --out. `--parallel`: build
+    /// speed-up with each thread count on INPUTS (and on all of them as one
+    /// batch), every output checked to be the same bytes whatever the count;
+    /// writes parallel.md, parallel.json and parallel.svg to --out, and
+    /// exits 1 if some output differs.
+    #[command(group(clap::ArgGroup::new("which").required(true).args(["accuracy", "compression", "parallel"])))]
     Bench {
         /// Run the accuracy benchmark.
         #[arg(long)]
@@ -220,6 +224,9 @@ enum Command {
         /// Run the compression benchmark (needs INPUTS).
         #[arg(long, requires = "inputs")]
         compression: bool,
+        /// Run the thread-scaling benchmark (needs INPUTS).
+        #[arg(long, requires = "inputs")]
+        parallel: bool,
         /// Model files (.obj, .gltf, .glb); for --accuracy, besides the
         /// hard-case suite.
         inputs: Vec<PathBuf>,
@@ -242,9 +249,15 @@ enum Command {
         #[arg(long, value_delimiter = ',', allow_negative_numbers = true, default_values_t = svpack::compression::CompressionConfig::default().levels,
               value_parser = clap::value_parser!(i32).range(*ZSTD_LEVELS.start() as i64..=*ZSTD_LEVELS.end() as i64))]
         levels: Vec<i32>,
-        /// Timing runs per measurement for --compression (the fastest counts).
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
-        reps: u64,
+        /// Timing runs per measurement: for --compression the fastest counts
+        /// (default 3); for --parallel, timed builds per input and thread
+        /// count (default 10).
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+        reps: Option<u64>,
+        /// Thread counts measured by --parallel, comma-separated (default 1,
+        /// 2, 4, … and the number of cores).
+        #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(1..=1024))]
+        thread_counts: Vec<u64>,
     },
     /// Replay a .svpk file on the CPU: check the sides/caps bijection and,
     /// per light, that the emitted shadow volume is closed. Exit 2 on failure.
@@ -721,6 +734,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
         Command::Bench {
             accuracy: _,
             compression,
+            parallel,
             inputs,
             out,
             lights,
@@ -729,13 +743,37 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             no_hard_cases,
             levels,
             reps,
+            thread_counts,
         } => {
-            let work = tempfile::tempdir().map_err(|e| svpack::error::Error::io(&out, e))?;
             let progress = &mut |line: &str| eprintln!("{line}");
-            let (md, paths, seconds, failed) = if compression {
+            // The parallel bench's builds write where its report goes, as a
+            // build writes beside its outputs; the others' files are small
+            // or not timed.
+            let work = if parallel {
+                std::fs::create_dir_all(&out).map_err(|e| svpack::error::Error::io(&out, e))?;
+                tempfile::Builder::new()
+                    .prefix(".svpack-bench")
+                    .tempdir_in(&out)
+            } else {
+                tempfile::tempdir()
+            }
+            .map_err(|e| svpack::error::Error::io(&out, e))?;
+            let mut differing = Vec::new();
+            let (md, paths, seconds, failed) = if parallel {
+                let mut cfg = svpack::parallel::ParallelConfig::default();
+                if !thread_counts.is_empty() {
+                    cfg.threads = thread_counts.iter().map(|&t| t as usize).collect();
+                }
+                cfg.rounds = reps.map_or(cfg.rounds, |r| r as usize);
+                let rep = svpack::parallel::run(&inputs, &cfg, work.path(), progress)?;
+                let paths = svpack::parallel::write_outputs(&rep, &out)?;
+                differing = rep.differing();
+                let md = svpack::parallel::to_markdown(&rep);
+                (md, paths, rep.seconds, rep.failed.len())
+            } else if compression {
                 let cfg = svpack::compression::CompressionConfig {
                     levels,
-                    reps: reps as usize,
+                    reps: reps.unwrap_or(3) as usize,
                 };
                 let rep = svpack::compression::run(&inputs, &cfg, work.path(), progress)?;
                 let paths = svpack::compression::write_outputs(&rep, &out)?;
@@ -759,6 +797,18 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                 eprintln!("wrote {}", p.display());
             }
             eprintln!("{seconds:.1} s");
+            if !differing.is_empty() {
+                let which: Vec<String> = differing
+                    .iter()
+                    .map(|(input, t)| {
+                        format!("{input} with {t} thread{}", if *t == 1 { "" } else { "s" })
+                    })
+                    .collect();
+                return Err(svpack::error::Error::Other(format!(
+                    "outputs differ from the one-thread build's: {}",
+                    which.join(", ")
+                )));
+            }
             if failed > 0 {
                 return Err(svpack::error::Error::Other(format!(
                     "{failed} inputs could not be built"

@@ -1,0 +1,788 @@
+//! `svpack bench --parallel`: how a build speeds up with threads on the
+//! caller's models, and whether every thread count writes the same bytes.
+//!
+//! For each input, one build per thread count per round, the counts taking
+//! turns (their order reversed every other round, so that a slow phase of
+//! the machine falls on all of them alike); each build runs as `svpack
+//! build --threads N` runs it ([`crate::build::build_batch`] with one input
+//! and a pool of N threads), into a file of its own that is removed before
+//! the next (so no build pays for removing the last one's output). A first,
+//! untimed build with one thread reads the input into the page cache and
+//! gives the reference output: every timed build's file must be the same
+//! bytes (SHA-256 of the whole file), whatever its thread count. With two
+//! inputs or more, the whole set is also built as one batch
+//! ([`crate::build::build_batch`] with N jobs, as `svpack build A B ... -o
+//! DIR --threads N`), in the same rounds, each output checked against its
+//! input's reference.
+//!
+//! Why: the README's targets measure one-thread and two-thread builds of two
+//! inputs on one machine (`benches/targets.py`); a studio's build machines
+//! have other core counts and other models. This gives them the same
+//! figures on their own: the time after parsing (weld, topology, layout and
+//! write: what the thread count can speed up) and the whole build, the
+//! speed-up over the first count (one thread unless told otherwise), and the
+//! check that the outputs do not depend on the count.
+//!
+//! The builds run in this process, one after another: the pages one build
+//! frees may serve the next, as in a batch, where a build in a fresh process
+//! (one command per model) first touches fresh pages. Times are wall times
+//! from the build's own stage clocks (`--timings`).
+
+use crate::build::{BuildConfig, BuildOutput, Timings, batch_outputs, build_batch};
+use crate::error::{Error, Result};
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::fmt::Write as _;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of a parallel run.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParallelConfig {
+    /// Thread counts to measure, each at least 1; measured in ascending
+    /// order, each once. Speed-ups are against the smallest.
+    pub threads: Vec<usize>,
+    /// Timed builds per input and thread count.
+    pub rounds: usize,
+}
+
+impl Default for ParallelConfig {
+    fn default() -> Self {
+        ParallelConfig {
+            threads: default_thread_counts(cores()),
+            rounds: 10,
+        }
+    }
+}
+
+/// Cores this process may run on (1 when unknown).
+pub fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// 1, 2, 4, … below `cores`, then `cores` itself: the counts worth asking
+/// for on a machine with that many cores.
+pub fn default_thread_counts(cores: usize) -> Vec<usize> {
+    let cores = cores.max(1);
+    let mut v: Vec<usize> = std::iter::successors(Some(1usize), |&n| n.checked_mul(2))
+        .take_while(|&n| n < cores)
+        .collect();
+    v.push(cores);
+    v
+}
+
+/// Fastest and median of a set of timings, ms (or of a ratio of two such).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Spread {
+    /// Smallest value.
+    pub fastest: f64,
+    /// Median (the mean of the two middle values of an even count).
+    pub median: f64,
+}
+
+impl Spread {
+    /// Fastest and median of `v` (empty: zeros).
+    pub fn of(v: &[f64]) -> Spread {
+        if v.is_empty() {
+            return Spread::default();
+        }
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let median = if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            (v[n / 2 - 1] + v[n / 2]) / 2.0
+        };
+        Spread {
+            fastest: v[0],
+            median,
+        }
+    }
+
+    /// `base` over `self`, fastest over fastest and median over median: the
+    /// speed-up of `self`'s times against `base`'s.
+    pub fn speedup_from(self, base: Spread) -> Spread {
+        Spread {
+            fastest: base.fastest / self.fastest,
+            median: base.median / self.median,
+        }
+    }
+}
+
+/// One thread count on one input.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThreadRun {
+    /// Threads of the build's pool.
+    pub threads: usize,
+    /// The whole build (load to renamed file), ms.
+    pub whole_ms: Spread,
+    /// Weld + topology + layout + write, ms: the build after parsing.
+    pub after_parsing_ms: Spread,
+    /// The weld stage, ms.
+    pub weld_ms: Spread,
+    /// The topology stage, ms.
+    pub topology_ms: Spread,
+    /// The layout and write stages, ms.
+    pub layout_write_ms: Spread,
+    /// Speed-up after parsing against the first thread count.
+    pub speedup: Spread,
+    /// Speed-up of the whole build against the first thread count.
+    pub whole_speedup: Spread,
+    /// Every output of this count was the reference's bytes.
+    pub identical: bool,
+}
+
+/// One input.
+#[derive(Debug, Clone, Serialize)]
+pub struct InputResult {
+    /// File name.
+    pub input: String,
+    /// Triangles in the output.
+    pub triangles: u64,
+    /// Bytes of the output.
+    pub file_bytes: u64,
+    /// SHA-256 of the reference output (hex).
+    pub output_sha256: String,
+    /// Per thread count, ascending.
+    pub runs: Vec<ThreadRun>,
+}
+
+/// One thread count on the whole set as one batch.
+#[derive(Debug, Clone, Serialize)]
+pub struct BatchRun {
+    /// Jobs (threads of the batch's pool).
+    pub threads: usize,
+    /// Wall time of the batch, ms.
+    pub wall_ms: Spread,
+    /// Speed-up against the first thread count.
+    pub speedup: Spread,
+    /// Every output was its input's reference bytes.
+    pub identical: bool,
+}
+
+/// The whole set built as one batch.
+#[derive(Debug, Clone, Serialize)]
+pub struct BatchResult {
+    /// The inputs in the batch (those that built).
+    pub inputs: Vec<String>,
+    /// Per thread count, ascending.
+    pub runs: Vec<BatchRun>,
+}
+
+/// Everything a parallel run measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParallelReport {
+    /// The options (thread counts sorted and deduplicated).
+    pub config: ParallelConfig,
+    /// Cores this process could run on.
+    pub cores: usize,
+    /// Per input.
+    pub inputs: Vec<InputResult>,
+    /// The batch of every input that built, when there were two or more.
+    pub batch: Option<BatchResult>,
+    /// Inputs that could not be built: (name, error).
+    pub failed: Vec<(String, String)>,
+    /// Wall time of the run, s.
+    pub seconds: f64,
+}
+
+impl ParallelReport {
+    /// Whether some thread count wrote other bytes than the reference, for
+    /// some input or in the batch: (input or "batch", thread count).
+    pub fn differing(&self) -> Vec<(String, usize)> {
+        let inputs = self.inputs.iter().flat_map(|i| {
+            i.runs
+                .iter()
+                .filter(|r| !r.identical)
+                .map(|r| (i.input.clone(), r.threads))
+        });
+        let batch = self.batch.iter().flat_map(|b| {
+            b.runs
+                .iter()
+                .filter(|r| !r.identical)
+                .map(|r| ("batch".to_string(), r.threads))
+        });
+        inputs.chain(batch).collect()
+    }
+}
+
+/// SHA-256 of the file at `path`.
+pub fn file_sha256(path: &Path) -> Result<[u8; 32]> {
+    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut h = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf).map_err(|e| Error::io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        h.update(&buf[..n]);
+    }
+    Ok(h.finalize().into())
+}
+
+fn hex(d: &[u8; 32]) -> String {
+    d.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Removes `path` if it is there.
+fn remove_if_present(path: &Path) -> Result<()> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(path, e)),
+        _ => Ok(()),
+    }
+}
+
+/// Builds `input` into `output` with a pool of `threads` threads, as the
+/// command line does, after removing `output`.
+fn build_once(input: &Path, output: &Path, threads: usize) -> Result<BuildOutput> {
+    remove_if_present(output)?;
+    let cfg = BuildConfig::default();
+    build_batch(
+        &[input.to_path_buf()],
+        &[output.to_path_buf()],
+        &cfg,
+        threads,
+    )
+    .pop()
+    .expect("one result per input")
+}
+
+/// The counts of round `r`: ascending in even rounds, descending in odd.
+fn round_order(counts: &[usize], r: usize) -> Vec<usize> {
+    let mut v = counts.to_vec();
+    if r % 2 == 1 {
+        v.reverse();
+    }
+    v
+}
+
+/// The timings a round keeps for one build.
+#[derive(Default)]
+struct Samples {
+    whole: Vec<f64>,
+    after: Vec<f64>,
+    weld: Vec<f64>,
+    topology: Vec<f64>,
+    layout_write: Vec<f64>,
+    identical: bool,
+}
+
+impl Samples {
+    fn new() -> Samples {
+        Samples {
+            identical: true,
+            ..Samples::default()
+        }
+    }
+
+    fn push(&mut self, t: &Timings) {
+        self.whole.push(t.total);
+        self.after.push(t.weld + t.topology + t.layout + t.write);
+        self.weld.push(t.weld);
+        self.topology.push(t.topology);
+        self.layout_write.push(t.layout + t.write);
+    }
+}
+
+/// A validated copy of `cfg`: counts sorted, each once; at least one round.
+fn checked(cfg: &ParallelConfig) -> Result<ParallelConfig> {
+    let mut threads = cfg.threads.clone();
+    if threads.is_empty() || threads.contains(&0) {
+        return Err(Error::Other(
+            "thread counts must be given and each at least 1".into(),
+        ));
+    }
+    threads.sort_unstable();
+    threads.dedup();
+    Ok(ParallelConfig {
+        threads,
+        rounds: cfg.rounds.max(1),
+    })
+}
+
+/// Runs the benchmark on `inputs`, writing the builds' files into
+/// `work_dir`. `progress` gets a line per input and thread count measured.
+pub fn run(
+    inputs: &[PathBuf],
+    cfg: &ParallelConfig,
+    work_dir: &Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<ParallelReport> {
+    let cfg = checked(cfg)?;
+    let start = Instant::now();
+    let out = work_dir.join("one.svpk");
+    let mut results = Vec::new();
+    let mut failed = Vec::new();
+    // (input path, its reference digest) of every input that built.
+    let mut built: Vec<(PathBuf, [u8; 32])> = Vec::new();
+    for input in inputs {
+        let name = file_name(input);
+        let first = match build_once(input, &out, 1) {
+            Ok(o) => o,
+            Err(e) => {
+                progress(&format!("{name}: skipped ({e})"));
+                failed.push((name, e.to_string()));
+                continue;
+            }
+        };
+        let reference = file_sha256(&out)?;
+        let mut samples: Vec<Samples> = cfg.threads.iter().map(|_| Samples::new()).collect();
+        for r in 0..cfg.rounds {
+            for t in round_order(&cfg.threads, r) {
+                let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
+                let o = build_once(input, &out, t)?;
+                samples[i].push(&o.timings);
+                if file_sha256(&out)? != reference {
+                    samples[i].identical = false;
+                }
+            }
+        }
+        let runs = thread_runs(&cfg.threads, &samples);
+        for run in &runs {
+            progress(&format!(
+                "{name}: {} thread{}: after parsing {:.1} / {:.1} ms ({:.2}× / {:.2}×){}",
+                run.threads,
+                if run.threads == 1 { "" } else { "s" },
+                run.after_parsing_ms.fastest,
+                run.after_parsing_ms.median,
+                run.speedup.fastest,
+                run.speedup.median,
+                if run.identical {
+                    ""
+                } else {
+                    ", OUTPUT DIFFERS"
+                }
+            ));
+        }
+        results.push(InputResult {
+            input: name,
+            triangles: first.header.meshes.iter().map(|m| m.stats.triangles).sum(),
+            file_bytes: first.file_bytes,
+            output_sha256: hex(&reference),
+            runs,
+        });
+        built.push((input.clone(), reference));
+    }
+    remove_if_present(&out)?;
+    let batch = if built.len() >= 2 {
+        Some(run_batch(&built, &cfg, work_dir, progress)?)
+    } else {
+        None
+    };
+    Ok(ParallelReport {
+        config: cfg,
+        cores: cores(),
+        inputs: results,
+        batch,
+        failed,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Each count's spreads from its samples, speed-ups against the first.
+fn thread_runs(counts: &[usize], samples: &[Samples]) -> Vec<ThreadRun> {
+    let base = (Spread::of(&samples[0].after), Spread::of(&samples[0].whole));
+    counts
+        .iter()
+        .zip(samples)
+        .map(|(&threads, s)| {
+            let (after, whole) = (Spread::of(&s.after), Spread::of(&s.whole));
+            ThreadRun {
+                threads,
+                whole_ms: whole,
+                after_parsing_ms: after,
+                weld_ms: Spread::of(&s.weld),
+                topology_ms: Spread::of(&s.topology),
+                layout_write_ms: Spread::of(&s.layout_write),
+                speedup: after.speedup_from(base.0),
+                whole_speedup: whole.speedup_from(base.1),
+                identical: s.identical,
+            }
+        })
+        .collect()
+}
+
+/// The inputs of `built` as one batch per count per round, into
+/// `work_dir/batch`, each output checked against its reference.
+fn run_batch(
+    built: &[(PathBuf, [u8; 32])],
+    cfg: &ParallelConfig,
+    work_dir: &Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<BatchResult> {
+    let dir = work_dir.join("batch");
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    let inputs: Vec<PathBuf> = built.iter().map(|(p, _)| p.clone()).collect();
+    let outputs = batch_outputs(&inputs, &dir)?;
+    let build = BuildConfig::default();
+    let mut wall: Vec<Vec<f64>> = vec![Vec::new(); cfg.threads.len()];
+    let mut identical = vec![true; cfg.threads.len()];
+    for r in 0..cfg.rounds {
+        for t in round_order(&cfg.threads, r) {
+            let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
+            for o in &outputs {
+                remove_if_present(o)?;
+            }
+            let start = Instant::now();
+            let results = build_batch(&inputs, &outputs, &build, t);
+            wall[i].push(start.elapsed().as_secs_f64() * 1e3);
+            for (res, (o, (_, reference))) in results.into_iter().zip(outputs.iter().zip(built)) {
+                res?;
+                if file_sha256(o)? != *reference {
+                    identical[i] = false;
+                }
+            }
+        }
+    }
+    for o in &outputs {
+        remove_if_present(o)?;
+    }
+    let base = Spread::of(&wall[0]);
+    let runs: Vec<BatchRun> = cfg
+        .threads
+        .iter()
+        .zip(wall.iter().zip(identical))
+        .map(|(&threads, (w, identical))| {
+            let wall_ms = Spread::of(w);
+            BatchRun {
+                threads,
+                wall_ms,
+                speedup: wall_ms.speedup_from(base),
+                identical,
+            }
+        })
+        .collect();
+    for run in &runs {
+        progress(&format!(
+            "batch of {}: {} thread{}: {:.1} / {:.1} ms ({:.2}× / {:.2}×){}",
+            inputs.len(),
+            run.threads,
+            if run.threads == 1 { "" } else { "s" },
+            run.wall_ms.fastest,
+            run.wall_ms.median,
+            run.speedup.fastest,
+            run.speedup.median,
+            if run.identical {
+                ""
+            } else {
+                ", OUTPUT DIFFERS"
+            }
+        ));
+    }
+    Ok(BatchResult {
+        inputs: built.iter().map(|(p, _)| file_name(p)).collect(),
+        runs,
+    })
+}
+
+fn file_name(p: &Path) -> String {
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// "identical", or what a reader must not miss.
+fn output_word(identical: bool) -> &'static str {
+    if identical {
+        "identical"
+    } else {
+        "**DIFFERS**"
+    }
+}
+
+/// The report as markdown: one table per input, then the batch's.
+pub fn to_markdown(r: &ParallelReport) -> String {
+    let mut o = String::new();
+    let base = r.config.threads[0];
+    let _ = writeln!(
+        o,
+        "Builds with each thread count as `svpack build --threads N` runs them ({} rounds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
+        r.config.rounds,
+        r.cores,
+        if r.cores == 1 { "" } else { "s" },
+        if base == 1 { "" } else { "s" },
+        if base == 1 {
+            ""
+        } else {
+            " over the first count's"
+        },
+    );
+    for i in &r.inputs {
+        let _ = writeln!(
+            o,
+            "**{}** ({} triangles, a {:.2} MB file)\n",
+            i.input,
+            i.triangles,
+            i.file_bytes as f64 / 1e6
+        );
+        let _ = writeln!(
+            o,
+            "| threads | whole build | after parsing | weld | topology | layout + write | speed-up after parsing | speed-up whole | efficiency | output |"
+        );
+        let _ = writeln!(o, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+        for run in &i.runs {
+            let s = |x: Spread| format!("{:.1} / {:.1}", x.fastest, x.median);
+            let x = |x: Spread| format!("{:.2}× / {:.2}×", x.fastest, x.median);
+            let _ = writeln!(
+                o,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
+                run.threads,
+                s(run.whole_ms),
+                s(run.after_parsing_ms),
+                s(run.weld_ms),
+                s(run.topology_ms),
+                s(run.layout_write_ms),
+                x(run.speedup),
+                x(run.whole_speedup),
+                run.speedup.fastest * base as f64 / run.threads as f64,
+                output_word(run.identical),
+            );
+        }
+        o.push('\n');
+    }
+    if let Some(b) = &r.batch {
+        let _ = writeln!(
+            o,
+            "**The {} inputs as one batch** (`svpack build {} -o DIR --threads N`): wall time, fastest / median ms\n",
+            b.inputs.len(),
+            b.inputs.join(" ")
+        );
+        let _ = writeln!(o, "| threads | batch | speed-up | efficiency | outputs |");
+        let _ = writeln!(o, "|---:|---:|---:|---:|---|");
+        for run in &b.runs {
+            let _ = writeln!(
+                o,
+                "| {} | {:.1} / {:.1} | {:.2}× / {:.2}× | {:.2} | {} |",
+                run.threads,
+                run.wall_ms.fastest,
+                run.wall_ms.median,
+                run.speedup.fastest,
+                run.speedup.median,
+                run.speedup.fastest * base as f64 / run.threads as f64,
+                output_word(run.identical),
+            );
+        }
+        o.push('\n');
+    }
+    for (name, e) in &r.failed {
+        let _ = writeln!(o, "- {name}: not measured ({e})");
+    }
+    o
+}
+
+/// The report as an SVG chart: the fastest speed-up after parsing against
+/// the thread count, one line per input (and the batch's, of its whole
+/// wall time), beside the ideal (speed-up = threads / the first count).
+pub fn to_svg(r: &ParallelReport) -> std::result::Result<String, String> {
+    use plotters::prelude::*;
+    let base = r.config.threads[0] as f64;
+    let max_t = *r.config.threads.last().expect("a count") as f64;
+    let mut lines: Vec<(String, Vec<(f64, f64)>)> = r
+        .inputs
+        .iter()
+        .map(|i| {
+            let pts = i
+                .runs
+                .iter()
+                .map(|x| (x.threads as f64, x.speedup.fastest))
+                .collect();
+            (i.input.clone(), pts)
+        })
+        .collect();
+    if let Some(b) = &r.batch {
+        let pts = b
+            .runs
+            .iter()
+            .map(|x| (x.threads as f64, x.speedup.fastest))
+            .collect();
+        lines.push((format!("batch of {} (whole builds)", b.inputs.len()), pts));
+    }
+    let ymax = lines
+        .iter()
+        .flat_map(|(_, p)| p.iter().map(|&(_, y)| y))
+        .filter(|y| y.is_finite())
+        .fold(max_t / base, f64::max)
+        * 1.35;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (760, 480)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption("svpack: build speed-up with threads", ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(56)
+            .build_cartesian_2d((base - 0.25)..(max_t + 0.25), 0.0..ymax)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("threads ({} cores here)", r.cores))
+            .x_label_formatter(&|x| {
+                if x.fract() == 0.0 {
+                    format!("{x:.0}")
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(format!(
+                "speed-up after parsing over {base} thread{}, fastest",
+                if base == 1.0 { "" } else { "s" }
+            ))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let ideal = BLACK.mix(0.35);
+        chart
+            .draw_series(LineSeries::new(
+                [(base, 1.0), (max_t, max_t / base)],
+                ideal.stroke_width(1),
+            ))
+            .map_err(|e| e.to_string())?
+            .label("ideal")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], ideal));
+        for (n, (name, pts)) in lines.iter().enumerate() {
+            let color = Palette99::pick(n).to_rgba();
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
+                .map_err(|e| e.to_string())?
+                .label(name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            chart
+                .draw_series(
+                    pts.iter()
+                        .map(|&(x, y)| Circle::new((x, y), 3, color.filled())),
+                )
+                .map_err(|e| e.to_string())?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// Writes `parallel.md`, `parallel.json` and `parallel.svg` into `out`
+/// (each atomically). Returns the three paths.
+pub fn write_outputs(r: &ParallelReport, out: &Path) -> Result<[PathBuf; 3]> {
+    crate::report::write_bench_files(out, "parallel", r, &to_markdown(r), to_svg(r))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Powers of two below the core count, then the count. Caught: the
+    /// core count left out when it is no power of two, and listed twice
+    /// when it is.
+    #[test]
+    fn default_counts_double_up_to_the_cores() {
+        assert_eq!(default_thread_counts(0), [1]);
+        assert_eq!(default_thread_counts(1), [1]);
+        assert_eq!(default_thread_counts(2), [1, 2]);
+        assert_eq!(default_thread_counts(6), [1, 2, 4, 6]);
+        assert_eq!(default_thread_counts(8), [1, 2, 4, 8]);
+    }
+
+    /// The median of an even count is the mean of the middle two, and a
+    /// speed-up divides the base by the time, fastest by fastest and
+    /// median by median. Caught: the upper middle taken as the median;
+    /// the ratio upside down.
+    #[test]
+    fn spreads_and_speedups() {
+        let s = Spread::of(&[5.0, 1.0, 4.0, 2.0]);
+        assert_eq!((s.fastest, s.median), (1.0, 3.0));
+        let s = Spread::of(&[5.0, 1.0, 4.0]);
+        assert_eq!((s.fastest, s.median), (1.0, 4.0));
+        let base = Spread {
+            fastest: 60.0,
+            median: 80.0,
+        };
+        let two = Spread {
+            fastest: 40.0,
+            median: 32.0,
+        };
+        assert_eq!(
+            two.speedup_from(base),
+            Spread {
+                fastest: 1.5,
+                median: 2.5
+            }
+        );
+    }
+
+    /// Counts are sorted and deduplicated, 0 and an empty list refused,
+    /// and the rounds alternate the order.
+    #[test]
+    fn counts_are_checked_and_take_turns() {
+        let c = checked(&ParallelConfig {
+            threads: vec![4, 1, 2, 4],
+            rounds: 0,
+        })
+        .unwrap();
+        assert_eq!((c.threads.as_slice(), c.rounds), (&[1, 2, 4][..], 1));
+        for bad in [vec![], vec![1, 0]] {
+            let cfg = ParallelConfig {
+                threads: bad,
+                rounds: 3,
+            };
+            assert!(checked(&cfg).is_err());
+        }
+        assert_eq!(round_order(&[1, 2, 4], 0), [1, 2, 4]);
+        assert_eq!(round_order(&[1, 2, 4], 1), [4, 2, 1]);
+    }
+
+    /// `differing` names every input and batch count whose outputs were
+    /// not all the reference's, and nothing else.
+    #[test]
+    fn differing_names_each_count_that_wrote_other_bytes() {
+        let run = |threads, identical| ThreadRun {
+            threads,
+            whole_ms: Spread::default(),
+            after_parsing_ms: Spread::default(),
+            weld_ms: Spread::default(),
+            topology_ms: Spread::default(),
+            layout_write_ms: Spread::default(),
+            speedup: Spread::default(),
+            whole_speedup: Spread::default(),
+            identical,
+        };
+        let input = |name: &str, runs| InputResult {
+            input: name.into(),
+            triangles: 0,
+            file_bytes: 0,
+            output_sha256: String::new(),
+            runs,
+        };
+        let batch_run = |threads, identical| BatchRun {
+            threads,
+            wall_ms: Spread::default(),
+            speedup: Spread::default(),
+            identical,
+        };
+        let mut r = ParallelReport {
+            config: ParallelConfig::default(),
+            cores: 2,
+            inputs: vec![
+                input("a", vec![run(1, true), run(2, true)]),
+                input("b", vec![run(1, true), run(2, false)]),
+            ],
+            batch: Some(BatchResult {
+                inputs: vec!["a".into(), "b".into()],
+                runs: vec![batch_run(1, true), batch_run(2, true)],
+            }),
+            failed: Vec::new(),
+            seconds: 0.0,
+        };
+        assert_eq!(r.differing(), [("b".to_string(), 2)]);
+        r.batch.as_mut().unwrap().runs[0].identical = false;
+        r.inputs[1].runs[1].identical = true;
+        assert_eq!(r.differing(), [("batch".to_string(), 1)]);
+    }
+}
