@@ -28,7 +28,7 @@
 //! (one command per model) first touches fresh pages. Times are wall times
 //! from the build's own stage clocks (`--timings`).
 
-use crate::build::{BuildConfig, BuildOutput, Timings, batch_outputs, build_batch};
+use crate::build::{BuildConfig, BuildOutput, Timings, build_batch};
 use crate::error::{Error, Result};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -416,7 +416,12 @@ fn run_batch(
     let dir = work_dir.join("batch");
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let inputs: Vec<PathBuf> = built.iter().map(|(p, _)| p.clone()).collect();
-    let outputs = batch_outputs(&inputs, &dir)?;
+    // Numbered, not named by stem as the command line names them: inputs
+    // with the same stem (a model as .obj and as .glb) can be measured
+    // together, and an output's name is not in its bytes.
+    let outputs: Vec<PathBuf> = (0..inputs.len())
+        .map(|i| dir.join(format!("{i}.svpk")))
+        .collect();
     let build = BuildConfig::default();
     let mut wall: Vec<Vec<f64>> = vec![Vec::new(); cfg.threads.len()];
     let mut identical = vec![true; cfg.threads.len()];

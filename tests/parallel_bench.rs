@@ -30,13 +30,20 @@ fn built(dir: &Path, input: &Path, t: &str) -> (String, Value) {
 /// and the batch get one row per count, ascending, every output identical;
 /// the reference digest is that of the file `build` writes with one thread
 /// and with two; triangles and bytes are the build's; the three files are
-/// written and the builds' files are gone. Caught: the counts measured as
-/// given (2 twice).
+/// written and the builds' files are gone. The two inputs have the same
+/// file name. Caught: the counts measured as given (2 twice); the batch's
+/// outputs named by stem (the run failed: both inputs "would write" one
+/// file).
 #[test]
 fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
     let tmp = tempfile::tempdir().unwrap();
     let a = common::torus(tmp.path(), 150, 0, 0.5);
-    let b = common::torus(tmp.path(), 60, 3, 0.2);
+    // The same stem as `a`'s: the batch measures them together all the
+    // same (the command line would refuse to write both into one
+    // directory).
+    std::fs::create_dir(tmp.path().join("b")).unwrap();
+    let b = tmp.path().join("b").join(a.file_name().unwrap());
+    std::fs::rename(common::torus(tmp.path(), 60, 3, 0.2), &b).unwrap();
     let out = tmp.path().join("bench");
     svpack()
         .args([
