@@ -773,7 +773,10 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             } else if compression {
                 let cfg = svpack::compression::CompressionConfig {
                     levels,
-                    reps: reps.unwrap_or(3) as usize,
+                    reps: reps.map_or(
+                        svpack::compression::CompressionConfig::default().reps,
+                        |r| r as usize,
+                    ),
                 };
                 let rep = svpack::compression::run(&inputs, &cfg, work.path(), progress)?;
                 let paths = svpack::compression::write_outputs(&rep, &out)?;

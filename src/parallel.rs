@@ -342,19 +342,13 @@ pub fn run(
         }
         let runs = thread_runs(&cfg.threads, &samples);
         for run in &runs {
-            progress(&format!(
-                "{name}: {} thread{}: after parsing {:.1} / {:.1} ms ({:.2}× / {:.2}×){}",
+            progress(&count_line(
+                &name,
                 run.threads,
-                if run.threads == 1 { "" } else { "s" },
-                run.after_parsing_ms.fastest,
-                run.after_parsing_ms.median,
-                run.speedup.fastest,
-                run.speedup.median,
-                if run.identical {
-                    ""
-                } else {
-                    ", OUTPUT DIFFERS"
-                }
+                "after parsing ",
+                run.after_parsing_ms,
+                run.speedup,
+                run.identical,
             ));
         }
         results.push(InputResult {
@@ -461,26 +455,40 @@ fn run_batch(
         })
         .collect();
     for run in &runs {
-        progress(&format!(
-            "batch of {}: {} thread{}: {:.1} / {:.1} ms ({:.2}× / {:.2}×){}",
-            inputs.len(),
+        progress(&count_line(
+            &format!("batch of {}", inputs.len()),
             run.threads,
-            if run.threads == 1 { "" } else { "s" },
-            run.wall_ms.fastest,
-            run.wall_ms.median,
-            run.speedup.fastest,
-            run.speedup.median,
-            if run.identical {
-                ""
-            } else {
-                ", OUTPUT DIFFERS"
-            }
+            "",
+            run.wall_ms,
+            run.speedup,
+            run.identical,
         ));
     }
     Ok(BatchResult {
         inputs: built.iter().map(|(p, _)| file_name(p)).collect(),
         runs,
     })
+}
+
+/// A progress line: "LABEL: N threads: WHAT fastest / median ms (speed-ups)",
+/// and the alarm when an output differed.
+fn count_line(
+    label: &str,
+    threads: usize,
+    what: &str,
+    ms: Spread,
+    speedup: Spread,
+    identical: bool,
+) -> String {
+    format!(
+        "{label}: {threads} thread{}: {what}{:.1} / {:.1} ms ({:.2}× / {:.2}×){}",
+        if threads == 1 { "" } else { "s" },
+        ms.fastest,
+        ms.median,
+        speedup.fastest,
+        speedup.median,
+        if identical { "" } else { ", OUTPUT DIFFERS" }
+    )
 }
 
 fn file_name(p: &Path) -> String {
