@@ -9,11 +9,12 @@
 //! the next (so no build pays for removing the last one's output). A first,
 //! untimed build with one thread reads the input into the page cache and
 //! gives the reference output: every timed build's file must be the same
-//! bytes (SHA-256 of the whole file), whatever its thread count. With two
-//! inputs or more, the whole set is also built as one batch
-//! ([`crate::build::build_batch`] with N jobs, as `svpack build A B ... -o
-//! DIR --threads N`), in the same rounds, each output checked against its
-//! input's reference.
+//! bytes (SHA-256 of the whole file), whatever its thread count. An input
+//! whose first build is short gets more rounds than asked for
+//! ([`ROUND_TIME`]). With two inputs or more, the whole set is also built
+//! as one batch ([`crate::build::build_batch`] with N jobs, as `svpack
+//! build A B ... -o DIR --threads N`), in [`ParallelConfig::rounds`]
+//! rounds, each output checked against its input's reference.
 //!
 //! Why: the README's targets measure one-thread and two-thread builds of two
 //! inputs on one machine (`benches/targets.py`); a studio's build machines
@@ -43,8 +44,31 @@ pub struct ParallelConfig {
     /// Thread counts to measure, each at least 1; measured in ascending
     /// order, each once. Speed-ups are against the smallest.
     pub threads: Vec<usize>,
-    /// Timed builds per input and thread count.
+    /// Timed builds per input and thread count, at least: an input whose
+    /// untimed one-thread build took less than [`ROUND_TIME`] /
+    /// `rounds` gets more rounds, so that its one-thread builds take
+    /// about [`ROUND_TIME`] in all, up to [`MAX_ROUNDS`].
     pub rounds: usize,
+}
+
+/// About how long an input's one-thread builds take in all: short builds
+/// get more rounds than [`ParallelConfig::rounds`] until they fill it.
+///
+/// Why: the builds of a 70–90k-triangle model take 3–5 ms after parsing,
+/// and four rounds of them put the bunny's and the armadillo's two-thread
+/// speed-ups at 0.80× and 0.95×, ten at 1.33× and 1.66× (one local run
+/// each): a few slow builds move the median of a short set.
+pub const ROUND_TIME: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Most rounds an input gets for being short (unless
+/// [`ParallelConfig::rounds`] asks for more).
+pub const MAX_ROUNDS: usize = 100;
+
+/// The rounds for an input whose untimed one-thread build took `first`:
+/// `least`, or as many as fill [`ROUND_TIME`], up to [`MAX_ROUNDS`].
+fn rounds_for(first: std::time::Duration, least: usize) -> usize {
+    let fill = (ROUND_TIME.as_secs_f64() / first.as_secs_f64().max(1e-6)).ceil();
+    least.max((fill as usize).min(MAX_ROUNDS))
 }
 
 impl Default for ParallelConfig {
@@ -145,6 +169,9 @@ pub struct InputResult {
     pub file_bytes: u64,
     /// SHA-256 of the reference output (hex).
     pub output_sha256: String,
+    /// Timed builds per thread count ([`ParallelConfig::rounds`], or more
+    /// for a short build).
+    pub rounds: usize,
     /// Per thread count, ascending.
     pub runs: Vec<ThreadRun>,
 }
@@ -329,8 +356,9 @@ pub fn run(
             }
         };
         let reference = file_sha256(&out)?;
+        let rounds = rounds_for(first.elapsed, cfg.rounds);
         let mut samples: Vec<Samples> = cfg.threads.iter().map(|_| Samples::new()).collect();
-        for r in 0..cfg.rounds {
+        for r in 0..rounds {
             for t in round_order(&cfg.threads, r) {
                 let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
                 let o = build_once(input, &out, t)?;
@@ -353,6 +381,7 @@ pub fn run(
         }
         results.push(InputResult {
             input: name,
+            rounds,
             triangles: first.header.meshes.iter().map(|m| m.stats.triangles).sum(),
             file_bytes: first.file_bytes,
             output_sha256: hex(&reference),
@@ -512,7 +541,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
     let base = r.config.threads[0];
     let _ = writeln!(
         o,
-        "Builds with each thread count as `svpack build --threads N` runs them ({} rounds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
+        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
         r.config.rounds,
         r.cores,
         if r.cores == 1 { "" } else { "s" },
@@ -526,10 +555,11 @@ pub fn to_markdown(r: &ParallelReport) -> String {
     for i in &r.inputs {
         let _ = writeln!(
             o,
-            "**{}** ({} triangles, a {:.2} MB file)\n",
+            "**{}** ({} triangles, a {:.2} MB file; {} rounds)\n",
             i.input,
             i.triangles,
-            i.file_bytes as f64 / 1e6
+            i.file_bytes as f64 / 1e6,
+            i.rounds
         );
         let _ = writeln!(
             o,
@@ -751,6 +781,20 @@ mod tests {
         assert_eq!(round_order(&[1, 2, 4], 1), [4, 2, 1]);
     }
 
+    /// Short builds get rounds until they fill about a second, within
+    /// the least asked for and the cap. Caught: the cap applied to what
+    /// was asked for (`--reps 150` gave 100).
+    #[test]
+    fn short_builds_get_more_rounds() {
+        let ms = std::time::Duration::from_millis;
+        assert_eq!(rounds_for(ms(2000), 10), 10);
+        assert_eq!(rounds_for(ms(80), 10), 13);
+        assert_eq!(rounds_for(ms(4), 10), MAX_ROUNDS);
+        assert_eq!(rounds_for(std::time::Duration::ZERO, 3), MAX_ROUNDS);
+        assert_eq!(rounds_for(ms(4), 150), 150);
+        assert_eq!(rounds_for(ms(80), 2), 13);
+    }
+
     /// `differing` names every input and batch count whose outputs were
     /// not all the reference's, and nothing else.
     #[test]
@@ -771,6 +815,7 @@ mod tests {
             triangles: 0,
             file_bytes: 0,
             output_sha256: String::new(),
+            rounds: 1,
             runs,
         };
         let batch_run = |threads, identical| BatchRun {

@@ -82,6 +82,10 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
             .map(|x| x["threads"].as_u64().unwrap())
             .collect();
         assert_eq!(counts, [1, 2], "{name}");
+        // `--reps 2` at least; builds of a few ms get more rounds, up to
+        // 100.
+        let rounds = row["rounds"].as_u64().unwrap();
+        assert!((2..=100).contains(&rounds), "{name}: {rounds} rounds");
         for x in runs {
             assert_eq!(x["identical"], true, "{name}");
             let after = x["after_parsing_ms"]["fastest"].as_f64().unwrap();
@@ -113,6 +117,10 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
     }
     let md = std::fs::read_to_string(out.join("parallel.md")).unwrap();
     assert!(md.contains("**The 2 inputs as one batch**"), "{md}");
+    for row in inputs {
+        let rounds = format!("; {} rounds)", row["rounds"]);
+        assert!(md.contains(&rounds), "{md}");
+    }
     let svg = std::fs::read_to_string(out.join("parallel.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("speed-up with threads"));
     let mut left: Vec<String> = std::fs::read_dir(&out)
