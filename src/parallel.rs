@@ -286,7 +286,8 @@ fn round_order(counts: &[usize], r: usize) -> Vec<usize> {
     v
 }
 
-/// The timings a round keeps for one build.
+/// The timings of one thread count's builds of one input, and whether
+/// every one of them wrote the reference's bytes.
 #[derive(Default)]
 struct Samples {
     whole: Vec<f64>,
