@@ -63,16 +63,12 @@ fn read_rows(path: &Path) -> Result<Vec<Row>, String> {
 
 /// The chart as an SVG string.
 fn draw(rows: &[Row]) -> Result<String, String> {
-    let err = |e: &dyn std::fmt::Display| e.to_string();
     let (lo, hi) = rows.iter().fold((f64::MAX, 0f64), |(lo, hi), r| {
         (lo.min(r.triangles), hi.max(r.triangles))
     });
     let ymax = rows.iter().flat_map(|r| r.ns).fold(0.0, f64::max) * 1.15;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (720, 440)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let mut chart = ChartBuilder::on(&root)
+    svpack::report::svg_chart((720, 440), |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(
                 "svpack build: time per triangle against size",
                 ("sans-serif", 20),
@@ -80,8 +76,7 @@ fn draw(rows: &[Row]) -> Result<String, String> {
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(56)
-            .build_cartesian_2d((lo / 1.5..hi * 1.5).log_scale(), 0.0..ymax)
-            .map_err(|e| err(&e))?;
+            .build_cartesian_2d((lo / 1.5..hi * 1.5).log_scale(), 0.0..ymax)?;
         chart
             .configure_mesh()
             .x_desc("triangles (log scale)")
@@ -94,8 +89,7 @@ fn draw(rows: &[Row]) -> Result<String, String> {
                     format!("{}k", v / 1e3)
                 }
             })
-            .draw()
-            .map_err(|e| err(&e))?;
+            .draw()?;
         let series = [
             ("whole build (OBJ parse included), 1 thread", BLUE),
             ("after parsing, 1 thread", RED),
@@ -105,46 +99,32 @@ fn draw(rows: &[Row]) -> Result<String, String> {
         for (s, (label, color)) in series.into_iter().enumerate() {
             let pts: Vec<(f64, f64)> = scenes.iter().map(|r| (r.triangles, r.ns[s])).collect();
             chart
-                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-                .map_err(|e| err(&e))?
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
                 .label(label)
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
                 });
-            chart
-                .draw_series(pts.iter().map(|&c| Circle::new(c, 4, color.filled())))
-                .map_err(|e| err(&e))?;
+            chart.draw_series(pts.iter().map(|&c| Circle::new(c, 4, color.filled())))?;
             // Other inputs (the dragon): rings in the series' colour.
-            chart
-                .draw_series(
-                    rows.iter()
-                        .filter(|r| r.name != "scene")
-                        .map(|r| Circle::new((r.triangles, r.ns[s]), 7, color.stroke_width(2))),
-                )
-                .map_err(|e| err(&e))?;
+            chart.draw_series(
+                rows.iter()
+                    .filter(|r| r.name != "scene")
+                    .map(|r| Circle::new((r.triangles, r.ns[s]), 7, color.stroke_width(2))),
+            )?;
         }
         for r in rows.iter().filter(|r| r.name != "scene") {
-            chart
-                .draw_series(std::iter::once(
-                    EmptyElement::at((r.triangles, r.ns[0]))
-                        + Text::new(
-                            r.name.clone(),
-                            (10, -18),
-                            ("sans-serif", 13).into_font().color(&BLACK),
-                        ),
-                ))
-                .map_err(|e| err(&e))?;
+            chart.draw_series(std::iter::once(
+                EmptyElement::at((r.triangles, r.ns[0]))
+                    + Text::new(
+                        r.name.clone(),
+                        (10, -18),
+                        ("sans-serif", 13).into_font().color(&BLACK),
+                    ),
+            ))?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
-        root.present().map_err(|e| err(&e))?;
-    }
-    Ok(svg)
+        svpack::report::chart_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        Ok(())
+    })
 }
 
 fn main() {

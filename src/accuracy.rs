@@ -751,10 +751,7 @@ pub fn to_markdown(r: &AccuracyReport) -> String {
 /// percentage of lights with errors (hard cases and models as two series).
 pub fn to_svg(r: &AccuracyReport) -> std::result::Result<String, String> {
     use plotters::prelude::*;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (720, 440)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+    crate::report::svg_chart((720, 440), |root| {
         let xmax = r
             .strategies
             .iter()
@@ -770,19 +767,17 @@ pub fn to_svg(r: &AccuracyReport) -> std::result::Result<String, String> {
             .max(0.01)
             * 100.0
             * 1.2;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption("svpack: evaluator speed against error", ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(56)
-            .build_cartesian_2d(0.0..xmax, 0.0..ymax)
-            .map_err(|e| e.to_string())?;
+            .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
         chart
             .configure_mesh()
             .x_desc("ns per edge instance (one core)")
             .y_desc("% of lights with errors")
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         // Hard cases as large rings, models as dots, so equal points stay visible.
         let series = [("hard-case suite", RED, true), ("models", BLUE, false)];
         for (label, color, hard) in series {
@@ -807,8 +802,7 @@ pub fn to_svg(r: &AccuracyReport) -> std::result::Result<String, String> {
                 }
             };
             chart
-                .draw_series(pts.iter().map(|&(x, y, _)| marker((x, y))))
-                .map_err(|e| e.to_string())?
+                .draw_series(pts.iter().map(|&(x, y, _)| marker((x, y))))?
                 .label(label)
                 .legend(move |(x, y)| {
                     if hard {
@@ -819,29 +813,21 @@ pub fn to_svg(r: &AccuracyReport) -> std::result::Result<String, String> {
                 });
             // Names once, above the model points (offset in pixels).
             if !hard {
-                chart
-                    .draw_series(pts.iter().enumerate().map(|(i, &(x, y, name))| {
-                        // Alternate heights so neighbouring names do not overlap.
-                        let dy = if i % 2 == 0 { -22 } else { -38 };
-                        EmptyElement::at((x, y))
-                            + Text::new(
-                                name.to_string(),
-                                (6, dy),
-                                ("sans-serif", 13).into_font().color(&BLACK),
-                            )
-                    }))
-                    .map_err(|e| e.to_string())?;
+                chart.draw_series(pts.iter().enumerate().map(|(i, &(x, y, name))| {
+                    // Alternate heights so neighbouring names do not overlap.
+                    let dy = if i % 2 == 0 { -22 } else { -38 };
+                    EmptyElement::at((x, y))
+                        + Text::new(
+                            name.to_string(),
+                            (6, dy),
+                            ("sans-serif", 13).into_font().color(&BLACK),
+                        )
+                }))?;
             }
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())?;
-    }
-    Ok(svg)
+        crate::report::chart_legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
+        Ok(())
+    })
 }
 
 /// Writes `accuracy.md`, `accuracy.json` and `accuracy.svg` into `out`

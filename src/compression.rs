@@ -318,10 +318,7 @@ pub fn to_markdown(r: &CompressionReport) -> String {
 /// plain file) against compression speed, one point per level.
 pub fn to_svg(r: &CompressionReport) -> std::result::Result<String, String> {
     use plotters::prelude::*;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (760, 480)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+    crate::report::svg_chart((760, 480), |root| {
         let points = || r.inputs.iter().flat_map(|i| &i.levels);
         let (lo, hi) = points().fold((f64::INFINITY, 0.0f64), |(lo, hi), l| {
             (lo.min(l.compress_mb_s), hi.max(l.compress_mb_s))
@@ -333,13 +330,12 @@ pub fn to_svg(r: &CompressionReport) -> std::result::Result<String, String> {
         };
         // Room above the highest point for the legend (upper left).
         let ymax = points().map(|l| 100.0 * l.fraction).fold(1.0, f64::max) * 1.4;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption("svpack: zstd level, size against speed", ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(56)
-            .build_cartesian_2d((lo..hi).log_scale(), 0.0..ymax)
-            .map_err(|e| e.to_string())?;
+            .build_cartesian_2d((lo..hi).log_scale(), 0.0..ymax)?;
         chart
             .configure_mesh()
             .x_desc(format!(
@@ -347,8 +343,7 @@ pub fn to_svg(r: &CompressionReport) -> std::result::Result<String, String> {
                 r.threads
             ))
             .y_desc("compressed size, % of the plain file")
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         for (n, i) in r.inputs.iter().enumerate() {
             let color = Palette99::pick(n).to_rgba();
             let pts: Vec<(f64, f64, i32)> = i
@@ -360,34 +355,24 @@ pub fn to_svg(r: &CompressionReport) -> std::result::Result<String, String> {
                 .draw_series(LineSeries::new(
                     pts.iter().map(|&(x, y, _)| (x, y)),
                     color.stroke_width(1),
-                ))
-                .map_err(|e| e.to_string())?
+                ))?
                 .label(format!("{} ({})", i.input, i.positions))
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            chart
-                .draw_series(pts.iter().map(|&(x, y, level)| {
-                    EmptyElement::at((x, y))
-                        + Circle::new((0, 0), 3, color.filled())
-                        + Text::new(
-                            level.to_string(),
-                            (4, -14),
-                            ("sans-serif", 11).into_font().color(&BLACK),
-                        )
-                }))
-                .map_err(|e| e.to_string())?;
+            chart.draw_series(pts.iter().map(|&(x, y, level)| {
+                EmptyElement::at((x, y))
+                    + Circle::new((0, 0), 3, color.filled())
+                    + Text::new(
+                        level.to_string(),
+                        (4, -14),
+                        ("sans-serif", 11).into_font().color(&BLACK),
+                    )
+            }))?;
         }
         // Upper left: the fast levels' points crowd the right, and the slow
         // ones lie below a third of the plain size.
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())?;
-    }
-    Ok(svg)
+        crate::report::chart_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+        Ok(())
+    })
 }
 
 /// Writes `compression.md`, `compression.json` and `compression.svg` into

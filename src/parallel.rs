@@ -650,17 +650,13 @@ pub fn to_svg(r: &ParallelReport) -> std::result::Result<String, String> {
         .filter(|y| y.is_finite())
         .fold(max_t / base, f64::max)
         * 1.35;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (760, 480)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut chart = ChartBuilder::on(&root)
+    crate::report::svg_chart((760, 480), |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption("svpack: build speed-up with threads", ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(56)
-            .build_cartesian_2d((base - 0.25)..(max_t + 0.25), 0.0..ymax)
-            .map_err(|e| e.to_string())?;
+            .build_cartesian_2d((base - 0.25)..(max_t + 0.25), 0.0..ymax)?;
         chart
             .configure_mesh()
             .x_desc(format!("threads ({} cores here)", r.cores))
@@ -675,41 +671,29 @@ pub fn to_svg(r: &ParallelReport) -> std::result::Result<String, String> {
                 "speed-up after parsing over {base} thread{}, fastest",
                 if base == 1.0 { "" } else { "s" }
             ))
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .draw()?;
         let ideal = BLACK.mix(0.35);
         chart
             .draw_series(LineSeries::new(
                 [(base, 1.0), (max_t, max_t / base)],
                 ideal.stroke_width(1),
-            ))
-            .map_err(|e| e.to_string())?
+            ))?
             .label("ideal")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], ideal));
         for (n, (name, pts)) in lines.iter().enumerate() {
             let color = Palette99::pick(n).to_rgba();
             chart
-                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
-                .map_err(|e| e.to_string())?
+                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
                 .label(name.as_str())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            chart
-                .draw_series(
-                    pts.iter()
-                        .map(|&(x, y)| Circle::new((x, y), 3, color.filled())),
-                )
-                .map_err(|e| e.to_string())?;
+            chart.draw_series(
+                pts.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 3, color.filled())),
+            )?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())?;
-    }
-    Ok(svg)
+        crate::report::chart_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+        Ok(())
+    })
 }
 
 /// Writes `parallel.md`, `parallel.json` and `parallel.svg` into `out`

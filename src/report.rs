@@ -465,3 +465,50 @@ pub fn write_bench_files(
     }
     Ok(paths)
 }
+
+/// The chart `draw` makes on a white SVG page of `size` pixels, as text:
+/// the page and its final flush, which every bench's chart shares; a
+/// drawing error comes back as its message.
+pub fn svg_chart(
+    size: (u32, u32),
+    draw: impl for<'a, 'b> FnOnce(
+        &'b plotters::drawing::DrawingArea<
+            plotters::backend::SVGBackend<'a>,
+            plotters::coord::Shift,
+        >,
+    ) -> std::result::Result<(), Box<dyn std::error::Error>>,
+) -> std::result::Result<String, String> {
+    use plotters::prelude::*;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        let drawn = (|| {
+            root.fill(&WHITE)?;
+            draw(&root)?;
+            root.present()?;
+            Ok::<_, Box<dyn std::error::Error>>(())
+        })();
+        drawn.map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// The legend of `chart`'s labelled series at `position`, in a white,
+/// slightly translucent box with a black border: every bench's chart has
+/// it so.
+pub fn chart_legend<'a, DB, CT>(
+    chart: &mut plotters::chart::ChartContext<'a, DB, CT>,
+    position: plotters::chart::SeriesLabelPosition,
+) -> std::result::Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: plotters::prelude::DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    use plotters::prelude::*;
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+}
