@@ -32,9 +32,7 @@
 use crate::build::{BuildConfig, BuildOutput, Timings, build_batch};
 use crate::error::{Error, Result};
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 use std::fmt::Write as _;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -235,23 +233,11 @@ impl ParallelReport {
     }
 }
 
-/// SHA-256 of the file at `path`.
+/// SHA-256 of the file at `path` (read or mapped as inputs are, hashed as
+/// an input's digest is).
 pub fn file_sha256(path: &Path) -> Result<[u8; 32]> {
-    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut h = Sha256::new();
-    let mut buf = vec![0u8; 1 << 20];
-    loop {
-        let n = f.read(&mut buf).map_err(|e| Error::io(path, e))?;
-        if n == 0 {
-            break;
-        }
-        h.update(&buf[..n]);
-    }
-    Ok(h.finalize().into())
-}
-
-fn hex(d: &[u8; 32]) -> String {
-    d.iter().map(|b| format!("{b:02x}")).collect()
+    let bytes = crate::file_bytes::read_or_map(path).map_err(|e| Error::io(path, e))?;
+    Ok(crate::load::InputDigest::of(&bytes).1)
 }
 
 /// Removes `path` if it is there.
@@ -385,7 +371,7 @@ pub fn run(
             rounds,
             triangles: first.header.meshes.iter().map(|m| m.stats.triangles).sum(),
             file_bytes: first.file_bytes,
-            output_sha256: hex(&reference),
+            output_sha256: crate::report::hex(&reference),
             runs,
         });
         built.push((input.clone(), reference));

@@ -120,7 +120,9 @@ pub struct Summary {
     pub warnings: Vec<String>,
 }
 
-fn hex(bytes: &[u8]) -> String {
+/// `bytes` in lower-case hexadecimal, two digits each (the digests of
+/// summaries and reports).
+pub fn hex(bytes: &[u8]) -> String {
     bytes.iter().fold(String::new(), |mut s, b| {
         let _ = write!(s, "{b:02x}");
         s
