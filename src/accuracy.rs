@@ -489,10 +489,7 @@ pub fn run(
         }
     }
     for i in inputs {
-        let name = i
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = crate::build::file_name(i);
         jobs.push((i.clone(), name, "model", Vec::new()));
     }
     let single = rayon::ThreadPoolBuilder::new()

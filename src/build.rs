@@ -350,7 +350,9 @@ pub fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
 /// result does not depend on how the blocks are combined).
 const CHECK_BLOCK: usize = 1 << 16;
 
-fn file_name(path: &Path) -> String {
+/// The last component of `path` as text (empty when it has none): the
+/// name a header, a summary or a bench report gives an input.
+pub(crate) fn file_name(path: &Path) -> String {
     path.file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default()

@@ -236,10 +236,7 @@ pub fn run(
     let mut results = Vec::new();
     let mut failed = Vec::new();
     for input in inputs {
-        let name = input
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = crate::build::file_name(input);
         for positions in [Encoding::F32, Encoding::Unorm16] {
             match measure(input, &name, positions, cfg, work_dir, progress) {
                 Ok(r) => results.push(r),

@@ -29,7 +29,7 @@
 //! (one command per model) first touches fresh pages. Times are wall times
 //! from the build's own stage clocks (`--timings`).
 
-use crate::build::{BuildConfig, BuildOutput, Timings, build_batch};
+use crate::build::{BuildConfig, BuildOutput, Timings, build_batch, file_name};
 use crate::error::{Error, Result};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -505,12 +505,6 @@ fn count_line(
         speedup.median,
         if identical { "" } else { ", OUTPUT DIFFERS" }
     )
-}
-
-fn file_name(p: &Path) -> String {
-    p.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
 }
 
 /// "identical", or what a reader must not miss.
