@@ -715,10 +715,31 @@ pub fn batch_outputs(
     Ok(out)
 }
 
+/// The order in which [`build_batch`] starts `inputs`: by
+/// [`load::work_estimate`], largest first, inputs of equal estimate in the
+/// order given.
+pub fn batch_order(inputs: &[std::path::PathBuf]) -> Vec<usize> {
+    let work: Vec<u64> = inputs.iter().map(|i| load::work_estimate(i)).collect();
+    let mut order: Vec<usize> = (0..inputs.len()).collect();
+    order.sort_by_key(|&n| std::cmp::Reverse(work[n]));
+    order
+}
+
 /// Builds every input into its output with up to `jobs` threads (0: all
-/// cores). Each build is independent and single-threaded, so every output is
-/// byte-identical whatever `jobs` is. Results come back in input order; a
-/// failing input does not stop the others.
+/// cores). Each build is independent and its output does not depend on the
+/// thread count, so every output is byte-identical whatever `jobs` is.
+/// Results come back in input order; a failing input does not stop the
+/// others.
+///
+/// With more inputs than jobs, the inputs start in [`batch_order`],
+/// largest first: each of `jobs` loops takes the next input when its last
+/// build ends, and a thread whose loop has run out helps the builds still
+/// running with their parallel passes. Why: a batch lasts at least as long
+/// as its largest build. When the inputs were split in halves in the order
+/// given, the largest could start after others on its thread and then run
+/// on alone, its parse on one thread; and built first, its freed blocks
+/// serve the smaller builds after it (`crate::alloc::KeepFreed`), so a
+/// batch takes fewer fresh pages (benches/ROUNDS.md, Fiftieth round).
 pub fn build_batch(
     inputs: &[std::path::PathBuf],
     outputs: &[std::path::PathBuf],
@@ -738,7 +759,8 @@ pub fn build_batch_with(
     stage: &(dyn Fn(usize, &'static str) + Sync),
     done: &(dyn Fn(usize) + Sync),
 ) -> Vec<Result<BuildOutput>> {
-    use rayon::prelude::*;
+    use std::sync::OnceLock;
+    use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
     // One guard for the whole batch: the blocks one input's build frees at
     // its end (its soup, welded mesh and edges) serve the next input's,
     // instead of each build starting from fresh pages (`crate::alloc`).
@@ -752,22 +774,43 @@ pub fn build_batch_with(
         pool = pool.start_handler(r.attach());
     }
     let pool = pool.build();
-    let run = || {
-        inputs
-            .par_iter()
-            .zip(outputs)
-            .enumerate()
-            .map(|(n, (i, o))| {
-                let r = build_file_with(i, o, cfg, &|s| stage(n, s));
-                done(n);
-                r
-            })
-            .collect()
+    let next = AtomicUsize::new(0);
+    let slots: Vec<OnceLock<Result<BuildOutput>>> =
+        inputs.iter().map(|_| OnceLock::new()).collect();
+    let work = |order: &[usize]| {
+        while let Some(&n) = order.get(next.fetch_add(1, Relaxed)) {
+            let r = build_file_with(&inputs[n], &outputs[n], cfg, &|s| stage(n, s));
+            done(n);
+            let _ = slots[n].set(r);
+        }
     };
-    let mut results: Vec<Result<BuildOutput>> = match pool {
+    let run = || {
+        let loops = rayon::current_num_threads().min(inputs.len());
+        // With a loop per input every build starts at once, and the
+        // estimates (a glTF's JSON read twice) would be spent for nothing.
+        let order = if loops < inputs.len() {
+            batch_order(inputs)
+        } else {
+            (0..inputs.len()).collect()
+        };
+        rayon::scope(|s| {
+            for _ in 1..loops {
+                s.spawn(|_| work(&order));
+            }
+            work(&order);
+        })
+    };
+    match pool {
         Ok(pool) => pool.install(run),
         Err(_) => run(),
-    };
+    }
+    let mut results: Vec<Result<BuildOutput>> = slots
+        .into_iter()
+        .map(|slot| {
+            slot.into_inner()
+                .unwrap_or_else(|| Err(Error::Other("the build did not run".to_string())))
+        })
+        .collect();
     // An old output that could not be removed fails its input's build, as
     // when the build removed it itself (the new output is in place).
     for (output, e) in remover

@@ -53,6 +53,59 @@ fn batch_outputs_are_identical_for_any_job_count() {
     }
 }
 
+/// A batch starts its inputs largest first (`build::batch_order`, by
+/// `load::work_estimate`) and answers in input order. With one job the
+/// builds run one after another, so the order in which their loads start
+/// is the schedule. Caught: the order reversed (smallest first); the loop
+/// taking the inputs in the order given; a result stored at its place in
+/// the schedule instead of its input's.
+#[test]
+fn a_batch_starts_its_largest_inputs_first_and_answers_in_input_order() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = write_fixtures(tmp.path());
+    let fixture = |name: &str| fx.iter().find(|f| f.0 == name).unwrap().1.clone();
+    let inputs = vec![
+        fixture("quad.obj"),
+        common::torus(tmp.path(), 40, 0, 0.5),
+        fixture("mirrored.gltf"),
+        fixture("fan12.obj"),
+    ];
+    let work: Vec<u64> = inputs
+        .iter()
+        .map(|i| svpack::load::work_estimate(i))
+        .collect();
+    let order = svpack::build::batch_order(&inputs);
+    let mut sorted = order.clone();
+    sorted.sort();
+    assert_eq!(sorted, [0, 1, 2, 3]);
+    assert_eq!(order[0], 1, "the torus first: {work:?}");
+    assert!(
+        order.windows(2).all(|w| work[w[0]] >= work[w[1]]),
+        "{order:?} by {work:?}"
+    );
+    let outputs: Vec<_> = (0..inputs.len())
+        .map(|n| tmp.path().join(format!("out{n}.svpk")))
+        .collect();
+    let started = std::sync::Mutex::new(Vec::new());
+    let results = svpack::build::build_batch_with(
+        &inputs,
+        &outputs,
+        &svpack::build::BuildConfig::default(),
+        1,
+        &|n, stage| {
+            if stage == "load" {
+                started.lock().unwrap().push(n);
+            }
+        },
+        &|_| {},
+    );
+    assert_eq!(*started.lock().unwrap(), order);
+    for (input, result) in inputs.iter().zip(results) {
+        let name = input.file_name().unwrap().to_str().unwrap();
+        assert_eq!(result.unwrap().header.input.file_name, name);
+    }
+}
+
 #[test]
 fn failing_inputs_are_reported_and_the_rest_built() {
     let tmp = tempfile::tempdir().unwrap();

@@ -292,6 +292,70 @@ fn trim_json(json: &[u8]) -> &[u8] {
     &json[..end]
 }
 
+/// JSON texts longer than this are not read for [`accessor_bytes`]: such a
+/// file holds its buffers in `data:` URIs, so its size already counts them.
+const ESTIMATE_JSON_MAX: u64 = 16 << 20;
+
+#[derive(serde::Deserialize)]
+struct AccessorsProbe {
+    #[serde(default)]
+    accessors: Vec<AccessorProbe>,
+}
+
+#[derive(serde::Deserialize)]
+struct AccessorProbe {
+    #[serde(default)]
+    count: u64,
+    #[serde(rename = "componentType", default)]
+    component_type: u32,
+    #[serde(rename = "type", default)]
+    kind: String,
+}
+
+/// The length of a glTF's JSON plus the bytes its accessors cover (count ×
+/// element size, each accessor once), from `file` whose first bytes are
+/// `head` and whose length is `size`: the estimate of its build's work that
+/// orders a batch (`load::work_estimate`). Only the JSON is read. None when
+/// the JSON cannot be read or parsed, or is longer than 16 MiB.
+pub fn accessor_bytes(file: &mut std::fs::File, head: &[u8], size: u64) -> Option<u64> {
+    use std::io::{Read, Seek, SeekFrom};
+    let (start, len) = if head.starts_with(b"glTF") {
+        // A GLB: its first chunk is the JSON (12-byte header, then the
+        // chunk's length and type).
+        if head.get(16..20) != Some(b"JSON") {
+            return None;
+        }
+        (20, u64::from(u32_le(head, 12)?))
+    } else {
+        (0, size)
+    };
+    if len > ESTIMATE_JSON_MAX {
+        return None;
+    }
+    file.seek(SeekFrom::Start(start)).ok()?;
+    let mut json = Vec::with_capacity(len as usize);
+    file.take(len).read_to_end(&mut json).ok()?;
+    let probe: AccessorsProbe = serde_json::from_slice(trim_json(&json)).ok()?;
+    let data = probe.accessors.iter().fold(0u64, |sum, a| {
+        let component = match a.component_type {
+            5120 | 5121 => 1,
+            5122 | 5123 => 2,
+            _ => 4,
+        };
+        let components = match a.kind.as_str() {
+            "SCALAR" => 1,
+            "VEC2" => 2,
+            "VEC3" => 3,
+            "VEC4" | "MAT2" => 4,
+            "MAT3" => 9,
+            "MAT4" => 16,
+            _ => 1,
+        };
+        sum.saturating_add(a.count.saturating_mul(component * components))
+    });
+    Some(data.saturating_add(json.len() as u64))
+}
+
 // ---------------------------------------------------------------------------
 // Version and extensions
 // ---------------------------------------------------------------------------

@@ -386,6 +386,37 @@ pub fn read_file(path: &Path) -> Result<FileBytes> {
     crate::file_bytes::read_or_map(path).map_err(|e| Error::io(path, e))
 }
 
+/// An estimate of the work of building the input at `path`, in weighted
+/// bytes, by which a batch starts its largest inputs first
+/// (`build::build_batch`). Reads at most the file's first bytes and a glTF's
+/// JSON, never its buffers.
+///
+/// - An OBJ counts its text twice: its build took about 9 ns a byte here
+///   (the dragon's 33 MB in 315 ms, the 5M scene's 204 MB in 1.8 s, one
+///   thread), about twice a glTF's per byte of geometry (the dragon's GLB,
+///   15.7 MB, in 68 ms).
+/// - A glTF counts its JSON and the bytes its accessors cover
+///   ([`gltf::accessor_bytes`]), wherever their buffers are: a `.gltf`'s own
+///   size leaves out its `.bin` files, and a `.glb`'s counts its images.
+/// - Anything else, and a glTF whose JSON cannot be read, counts its size;
+///   an unreadable file counts 0 (its build reports the problem).
+pub fn work_estimate(path: &Path) -> u64 {
+    use std::io::Read;
+    let Ok(mut file) = std::fs::File::open(path) else {
+        return 0;
+    };
+    let size = file.metadata().map_or(0, |m| m.len());
+    let mut head = Vec::with_capacity(20);
+    if (&mut file).take(20).read_to_end(&mut head).is_err() {
+        return size;
+    }
+    match detect_format(path, &head) {
+        Ok(Format::Obj) => size.saturating_mul(2),
+        Ok(Format::Gltf) => gltf::accessor_bytes(&mut file, &head, size).unwrap_or(size),
+        Err(_) => size,
+    }
+}
+
 /// Loads a glTF or OBJ file into a world-space soup.
 pub fn load(path: &Path) -> Result<Soup> {
     let data = read_file(path)?;
@@ -398,6 +429,57 @@ pub fn load(path: &Path) -> Result<Soup> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The estimates a batch orders its inputs by: an OBJ's text twice; a
+    /// glTF's JSON and its accessors' bytes, from a `.gltf` whose buffer is
+    /// another file (not there: only the JSON is read) and from a `.glb`
+    /// whose BIN chunk holds more than the accessors cover (an image);
+    /// otherwise the size, or 0 for a missing file. Caught: the OBJ's
+    /// weight left out; the GLB's JSON read from byte 12 (its size came
+    /// back); `MAT4` taken as 4 components.
+    #[test]
+    fn work_estimates_weigh_obj_text_and_gltf_accessors() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = |name: &str, bytes: &[u8]| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, bytes).unwrap();
+            p
+        };
+        let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+        assert_eq!(work_estimate(&at("t.obj", obj)), 2 * obj.len() as u64);
+        let json = br#"{"asset": {"version": "2.0"},
+  "accessors": [
+    {"bufferView": 0, "componentType": 5126, "count": 1000, "type": "VEC3"},
+    {"bufferView": 1, "componentType": 5123, "count": 3000, "type": "SCALAR"},
+    {"componentType": 5121, "count": 10, "type": "MAT4"}],
+  "buffers": [{"uri": "elsewhere.bin", "byteLength": 9999999}]}"#;
+        let accessors = 1000 * 12 + 3000 * 2 + 10 * 16;
+        let gltf = at("m.gltf", json);
+        assert_eq!(work_estimate(&gltf), json.len() as u64 + accessors);
+        // The JSON chunk padded with spaces to 4 bytes, then a BIN chunk.
+        let mut chunk = json.to_vec();
+        chunk.resize(json.len().next_multiple_of(4), b' ');
+        let bin = vec![7u8; 1 << 20];
+        let mut glb = b"glTF".to_vec();
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&((12 + 8 + chunk.len() + 8 + bin.len()) as u32).to_le_bytes());
+        glb.extend_from_slice(&(chunk.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"JSON");
+        glb.extend_from_slice(&chunk);
+        glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"BIN\0");
+        glb.extend_from_slice(&bin);
+        assert_eq!(
+            work_estimate(&at("m.glb", &glb)),
+            chunk.len() as u64 + accessors
+        );
+        // Not JSON, or not glTF JSON: the file's size.
+        let text = b"{\"accessors\": [{\"count\": \"many\"}]}";
+        assert_eq!(work_estimate(&at("broken.gltf", text)), text.len() as u64);
+        let other = at("notes.txt", b"twelve bytes");
+        assert_eq!(work_estimate(&other), 12);
+        assert_eq!(work_estimate(&dir.path().join("missing.obj")), 0);
+    }
 
     /// Slices hashed by two threads at once (each step takes the next
     /// slice or none), then the rest by `finish`: the SHA-256 of the whole,
