@@ -536,7 +536,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
     for i in &r.inputs {
         let _ = writeln!(
             o,
-            "**{}** ({} triangles, a {:.2} MB file; {} rounds)\n",
+            "**{}** ({} triangles, a {:.2} MB output; {} rounds)\n",
             i.input,
             i.triangles,
             i.file_bytes as f64 / 1e6,
