@@ -91,6 +91,17 @@ pub fn peak_memory_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// Sets the process's peak memory (`VmHWM`) back to its resident size now,
+/// so that [`peak_memory_bytes`] then gives the peak from this moment on
+/// (Linux 4.0 and later: `/proc/self/clear_refs`). False where that cannot
+/// be done; the peak then keeps covering the process's whole life.
+///
+/// Why: `svpack bench --parallel` runs many builds in one process, and the
+/// process's peak only grows; reset before each build, it is that build's.
+pub fn reset_peak_memory() -> bool {
+    std::fs::write("/proc/self/clear_refs", b"5").is_ok()
+}
+
 /// A stage reported to a progress callback: its name, as it starts.
 pub type StageCallback<'a> = &'a (dyn Fn(&'static str) + Sync);
 

@@ -27,7 +27,13 @@
 //! The builds run in this process, one after another: the pages one build
 //! frees may serve the next, as in a batch, where a build in a fresh process
 //! (one command per model) first touches fresh pages. Times are wall times
-//! from the build's own stage clocks (`--timings`).
+//! from the build's own stage clocks (`--timings`). The memory of a count
+//! is the most the process's resident size rose during one of its builds
+//! above its size just before it: the kernel's high-water mark, reset
+//! before each build ([`crate::build::reset_peak_memory`]). Not the
+//! process's peak: this process holds memory of its own and of the builds
+//! before (malloc's arenas of their threads), some 15 MiB more than a
+//! build's own process starts with.
 
 use crate::build::{BuildConfig, BuildOutput, Timings, build_batch, file_name};
 use crate::error::{Error, Result};
@@ -154,6 +160,10 @@ pub struct ThreadRun {
     pub whole_speedup: Spread,
     /// Every output of this count was the reference's bytes.
     pub identical: bool,
+    /// The most the process's resident size rose above its size before
+    /// the build, over this count's builds, bytes (see the module's
+    /// notes); None where the peak cannot be reset.
+    pub peak_added_bytes: Option<u64>,
 }
 
 /// One input.
@@ -185,6 +195,10 @@ pub struct BatchRun {
     pub speedup: Spread,
     /// Every output was its input's reference bytes.
     pub identical: bool,
+    /// The most the process's resident size rose above its size before
+    /// the batch, over this count's batches, bytes; None where the peak
+    /// cannot be reset.
+    pub peak_added_bytes: Option<u64>,
 }
 
 /// The whole set built as one batch.
@@ -282,6 +296,33 @@ struct Samples {
     topology: Vec<f64>,
     layout_write: Vec<f64>,
     identical: bool,
+    peak: Peak,
+}
+
+/// The most the resident size rose during one of a count's builds, above
+/// its size just before it; None once a build's could not be measured.
+#[derive(Clone, Copy)]
+struct Peak(Option<u64>);
+
+impl Default for Peak {
+    fn default() -> Self {
+        Peak(Some(0))
+    }
+}
+
+impl Peak {
+    /// Runs `build` with the process's peak reset before it (to its
+    /// resident size then), and takes in how far the peak rose.
+    fn measure<T>(&mut self, build: impl FnOnce() -> T) -> T {
+        use crate::build::{peak_memory_bytes, reset_peak_memory};
+        let start = reset_peak_memory().then(peak_memory_bytes).flatten();
+        let out = build();
+        self.0 = match (self.0, start, peak_memory_bytes()) {
+            (Some(most), Some(start), Some(peak)) => Some(most.max(peak.saturating_sub(start))),
+            _ => None,
+        };
+        out
+    }
 }
 
 impl Samples {
@@ -348,7 +389,7 @@ pub fn run(
         for r in 0..rounds {
             for t in round_order(&cfg.threads, r) {
                 let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
-                let o = build_once(input, &out, t)?;
+                let o = samples[i].peak.measure(|| build_once(input, &out, t))?;
                 samples[i].push(&o.timings);
                 if file_sha256(&out)? != reference {
                     samples[i].identical = false;
@@ -410,6 +451,7 @@ fn thread_runs(counts: &[usize], samples: &[Samples]) -> Vec<ThreadRun> {
                 speedup: after.speedup_from(base.0),
                 whole_speedup: whole.speedup_from(base.1),
                 identical: s.identical,
+                peak_added_bytes: s.peak.0,
             }
         })
         .collect()
@@ -435,6 +477,7 @@ fn run_batch(
     let build = BuildConfig::default();
     let mut wall: Vec<Vec<f64>> = vec![Vec::new(); cfg.threads.len()];
     let mut identical = vec![true; cfg.threads.len()];
+    let mut peaks = vec![Peak::default(); cfg.threads.len()];
     for r in 0..cfg.rounds {
         for t in round_order(&cfg.threads, r) {
             let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
@@ -442,7 +485,7 @@ fn run_batch(
                 remove_if_present(o)?;
             }
             let start = Instant::now();
-            let results = build_batch(&inputs, &outputs, &build, t);
+            let results = peaks[i].measure(|| build_batch(&inputs, &outputs, &build, t));
             wall[i].push(start.elapsed().as_secs_f64() * 1e3);
             for (res, (o, (_, reference))) in results.into_iter().zip(outputs.iter().zip(built)) {
                 res?;
@@ -459,14 +502,15 @@ fn run_batch(
     let runs: Vec<BatchRun> = cfg
         .threads
         .iter()
-        .zip(wall.iter().zip(identical))
-        .map(|(&threads, (w, identical))| {
+        .zip(wall.iter().zip(identical).zip(peaks))
+        .map(|(&threads, ((w, identical), peak))| {
             let wall_ms = Spread::of(w);
             BatchRun {
                 threads,
                 wall_ms,
                 speedup: wall_ms.speedup_from(base),
                 identical,
+                peak_added_bytes: peak.0,
             }
         })
         .collect();
@@ -507,6 +551,13 @@ fn count_line(
     )
 }
 
+/// Bytes as MiB with one decimal, or a dash when not measured.
+fn mib(bytes: Option<u64>) -> String {
+    bytes.map_or("–".to_string(), |b| {
+        format!("{:.1}", b as f64 / 1048576.0)
+    })
+}
+
 /// "identical", or what a reader must not miss.
 fn output_word(identical: bool) -> &'static str {
     if identical {
@@ -522,7 +573,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
     let base = r.config.threads[0];
     let _ = writeln!(
         o,
-        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
+        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. memory added is the most this process's resident size rose during one of the count's builds, above its size before it. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
         r.config.rounds,
         r.cores,
         if r.cores == 1 { "" } else { "s" },
@@ -544,15 +595,15 @@ pub fn to_markdown(r: &ParallelReport) -> String {
         );
         let _ = writeln!(
             o,
-            "| threads | whole build | after parsing | weld | topology | layout + write | speed-up after parsing | speed-up whole | efficiency | output |"
+            "| threads | whole build | after parsing | weld | topology | layout + write | speed-up after parsing | speed-up whole | efficiency | memory added, MiB | output |"
         );
-        let _ = writeln!(o, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+        let _ = writeln!(o, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
         for run in &i.runs {
             let s = |x: Spread| format!("{:.1} / {:.1}", x.fastest, x.median);
             let x = |x: Spread| format!("{:.2}× / {:.2}×", x.fastest, x.median);
             let _ = writeln!(
                 o,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} |",
                 run.threads,
                 s(run.whole_ms),
                 s(run.after_parsing_ms),
@@ -562,6 +613,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
                 x(run.speedup),
                 x(run.whole_speedup),
                 run.speedup.fastest * base as f64 / run.threads as f64,
+                mib(run.peak_added_bytes),
                 output_word(run.identical),
             );
         }
@@ -574,18 +626,22 @@ pub fn to_markdown(r: &ParallelReport) -> String {
             b.inputs.len(),
             b.inputs.join(" ")
         );
-        let _ = writeln!(o, "| threads | batch | speed-up | efficiency | outputs |");
-        let _ = writeln!(o, "|---:|---:|---:|---:|---|");
+        let _ = writeln!(
+            o,
+            "| threads | batch | speed-up | efficiency | memory added, MiB | outputs |"
+        );
+        let _ = writeln!(o, "|---:|---:|---:|---:|---:|---|");
         for run in &b.runs {
             let _ = writeln!(
                 o,
-                "| {} | {:.1} / {:.1} | {:.2}× / {:.2}× | {:.2} | {} |",
+                "| {} | {:.1} / {:.1} | {:.2}× / {:.2}× | {:.2} | {} | {} |",
                 run.threads,
                 run.wall_ms.fastest,
                 run.wall_ms.median,
                 run.speedup.fastest,
                 run.speedup.median,
                 run.speedup.fastest * base as f64 / run.threads as f64,
+                mib(run.peak_added_bytes),
                 output_word(run.identical),
             );
         }
@@ -761,7 +817,8 @@ mod tests {
     }
 
     /// `differing` names every input and batch count whose outputs were
-    /// not all the reference's, and nothing else.
+    /// not all the reference's, and nothing else; the markdown gives a
+    /// dash for memory not measured.
     #[test]
     fn differing_names_each_count_that_wrote_other_bytes() {
         let run = |threads, identical| ThreadRun {
@@ -774,6 +831,7 @@ mod tests {
             speedup: Spread::default(),
             whole_speedup: Spread::default(),
             identical,
+            peak_added_bytes: None,
         };
         let input = |name: &str, runs| InputResult {
             input: name.into(),
@@ -788,6 +846,7 @@ mod tests {
             wall_ms: Spread::default(),
             speedup: Spread::default(),
             identical,
+            peak_added_bytes: Some(3 << 20),
         };
         let mut r = ParallelReport {
             config: ParallelConfig::default(),
@@ -807,5 +866,9 @@ mod tests {
         r.batch.as_mut().unwrap().runs[0].identical = false;
         r.inputs[1].runs[1].identical = true;
         assert_eq!(r.differing(), [("batch".to_string(), 1)]);
+        // Memory not measured is a dash; measured, MiB.
+        let md = to_markdown(&r);
+        assert!(md.contains("| 0.00 | – | identical |"), "{md}");
+        assert!(md.contains("| 3.0 | **DIFFERS** |"), "{md}");
     }
 }

@@ -32,12 +32,14 @@ fn built(dir: &Path, input: &Path, t: &str) -> (String, Value) {
 /// Two inputs, the counts asked for out of order and one twice: each input
 /// and the batch get one row per count, ascending, every output identical;
 /// the reference digest is that of the file `build` writes with one thread
-/// and with two; triangles and bytes are the build's; the three files are
-/// written and the builds' files are gone. The two inputs have the same
-/// file name. Caught: the counts measured as given (2 twice); the batch's
-/// outputs named by stem (the run failed: both inputs "would write" one
-/// file); the bench hashing half of each file (its reference digest no
-/// longer the file's).
+/// and with two; triangles and bytes are the build's; each count's memory
+/// is its builds' own (the smaller input's less than the larger's); the
+/// three files are written and the builds' files are gone. The two inputs
+/// have the same file name. Caught: the counts measured as given (2
+/// twice); the batch's outputs named by stem (the run failed: both inputs
+/// "would write" one file); the bench hashing half of each file (its
+/// reference digest no longer the file's); the peak not reset before each
+/// build (every build but the first added 0 bytes).
 #[test]
 fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
     let tmp = tempfile::tempdir().unwrap();
@@ -71,6 +73,8 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
     assert_eq!(r["config"]["rounds"], 2);
     let inputs = r["inputs"].as_array().unwrap();
     assert_eq!(inputs.len(), 2);
+    // Per input, each count's memory added (bytes).
+    let mut peaks: Vec<Vec<u64>> = Vec::new();
     for (row, input) in inputs.iter().zip([&a, &b]) {
         let name = input.file_name().unwrap().to_str().unwrap();
         assert_eq!(row["input"], name);
@@ -98,12 +102,25 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
             let median = x["after_parsing_ms"]["median"].as_f64().unwrap();
             assert!(median >= after, "{name}: {x}");
         }
+        let added: Vec<u64> = runs
+            .iter()
+            .map(|x| x["peak_added_bytes"].as_u64().unwrap())
+            .collect();
+        peaks.push(added);
         // Speed-ups are against the first count: 1 for it, by definition.
         assert_eq!(runs[0]["speedup"]["fastest"], 1.0);
         let two = &runs[1];
         let ratio = runs[0]["after_parsing_ms"]["fastest"].as_f64().unwrap()
             / two["after_parsing_ms"]["fastest"].as_f64().unwrap();
         assert!((two["speedup"]["fastest"].as_f64().unwrap() - ratio).abs() < 1e-9);
+    }
+    // Each build's own rise, not the process's peak so far: `b`, measured
+    // after `a`, has 1/6 of its triangles and needs less memory.
+    for (t, (a_added, b_added)) in peaks[0].iter().zip(&peaks[1]).enumerate() {
+        assert!(
+            0 < *b_added && b_added < a_added,
+            "count {t}: a {a_added} B, b {b_added} B"
+        );
     }
     let batch = &r["batch"];
     assert_eq!(
@@ -118,6 +135,7 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
             (x["threads"].as_u64(), &x["identical"]),
             (Some(t), &Value::Bool(true))
         );
+        assert!(x["peak_added_bytes"].as_u64().unwrap() > 0, "{x}");
     }
     let md = std::fs::read_to_string(out.join("parallel.md")).unwrap();
     assert!(md.contains("**The 2 inputs as one batch**"), "{md}");
