@@ -385,6 +385,41 @@ fn shared_world_bounds_match_reference() {
     }
 }
 
+/// A GLB's work estimate (what a batch orders its inputs by) is its JSON
+/// chunk and the bytes its accessors cover, not its BIN chunk's image; a
+/// `.gltf`'s counts the geometry in its `.bin`. Caught: the GLB's JSON
+/// read from byte 12 (the estimate fell back to the file's size).
+#[test]
+fn a_glb_estimate_counts_its_json_and_accessors_not_its_images() {
+    let dir = tempdir();
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 300, "type": "VEC3"},
+            {"bufferView": 1, "componentType": 5125, "count": 900, "type": "SCALAR"}
+        ],
+        "buffers": [{"byteLength": 1 << 20}]
+    });
+    let path = dir.path().join("image_heavy.glb");
+    std::fs::write(&path, glb_bytes(&doc, &vec![7u8; 1 << 20])).unwrap();
+    let json_chunk = serde_json::to_vec(&doc).unwrap().len().next_multiple_of(4);
+    assert_eq!(
+        svpack::load::work_estimate(&path),
+        (json_chunk + 300 * 12 + 900 * 4) as u64
+    );
+    let Some(shared) = shared_meshes() else {
+        return;
+    };
+    let helmet = shared.join("gltf/FlightHelmet");
+    let size = |f: &str| std::fs::metadata(helmet.join(f)).unwrap().len();
+    let estimate = svpack::load::work_estimate(&helmet.join("FlightHelmet.gltf"));
+    let (json, bin) = (size("FlightHelmet.gltf"), size("FlightHelmet.bin"));
+    assert!(
+        json + bin / 2 < estimate && estimate <= json + bin,
+        "{estimate} against {json} + {bin}"
+    );
+}
+
 #[test]
 fn shared_flight_helmet_reads_external_bin() {
     let Some(shared) = shared_meshes() else {
