@@ -573,7 +573,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
     let base = r.config.threads[0];
     let _ = writeln!(
         o,
-        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. memory added is the most this process's resident size rose during one of the count's builds, above its size before it. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
+        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. \"memory added\" is the most this process's resident size rose during one of the count's builds, above its size before it. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
         r.config.rounds,
         r.cores,
         if r.cores == 1 { "" } else { "s" },
