@@ -258,6 +258,11 @@ enum Command {
         /// 2, 4, … and the number of cores).
         #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(1..=1024))]
         thread_counts: Vec<u64>,
+        /// With --parallel: run every build as a command of its own (this
+        /// binary's `build`), as a pipeline runs one command per model, its
+        /// memory fresh; the memory column is then each command's peak.
+        #[arg(long, requires = "parallel")]
+        fresh_process: bool,
     },
     /// Replay a .svpk file on the CPU: check the sides/caps bijection and,
     /// per light, that the emitted shadow volume is closed. Exit 2 on failure.
@@ -744,6 +749,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             levels,
             reps,
             thread_counts,
+            fresh_process,
         } => {
             let progress = &mut |line: &str| eprintln!("{line}");
             // The parallel bench's builds write where its report goes, as a
@@ -765,6 +771,14 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                     cfg.threads = thread_counts.iter().map(|&t| t as usize).collect();
                 }
                 cfg.rounds = reps.map_or(cfg.rounds, |r| r as usize);
+                if fresh_process {
+                    let exe = std::env::current_exe().map_err(|e| {
+                        svpack::error::Error::Other(format!(
+                            "--fresh-process: cannot find this program's file: {e}"
+                        ))
+                    })?;
+                    cfg.command = Some(exe);
+                }
                 let rep = svpack::parallel::run(&inputs, &cfg, work.path(), progress)?;
                 let paths = svpack::parallel::write_outputs(&rep, &out)?;
                 differing = rep.differing();

@@ -34,8 +34,14 @@
 //! process's peak: this process holds memory of its own and of the builds
 //! before (malloc's arenas of their threads), some 15 MiB more than a
 //! build's own process starts with.
+//!
+//! With [`ParallelConfig::command`] every build runs instead as a command
+//! of its own (`svpack build --timings --json`, its times read from the
+//! summary), as a pipeline that runs one command per model runs it: its
+//! buffers start from fresh pages, which on a virtual machine can come
+//! cold, and the memory is each command's peak.
 
-use crate::build::{BuildConfig, BuildOutput, Timings, build_batch, file_name};
+use crate::build::{BuildConfig, Timings, build_batch, file_name};
 use crate::error::{Error, Result};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -53,6 +59,12 @@ pub struct ParallelConfig {
     /// `rounds` gets more rounds, so that its one-thread builds take
     /// about [`ROUND_TIME`] in all, up to [`MAX_ROUNDS`].
     pub rounds: usize,
+    /// Run every build as a command of its own: this `svpack` binary's
+    /// `build --timings --json` (the batch's as `build A B … -o DIR`), as a
+    /// pipeline runs one command per model, so that each build's buffers
+    /// start from fresh pages. None: every build runs in this process.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub command: Option<PathBuf>,
 }
 
 /// About how long an input's one-thread builds take in all: short builds
@@ -80,6 +92,7 @@ impl Default for ParallelConfig {
         ParallelConfig {
             threads: default_thread_counts(cores()),
             rounds: 10,
+            command: None,
         }
     }
 }
@@ -160,10 +173,12 @@ pub struct ThreadRun {
     pub whole_speedup: Spread,
     /// Every output of this count was the reference's bytes.
     pub identical: bool,
-    /// The most the process's resident size rose above its size before
-    /// the build, over this count's builds, bytes (see the module's
-    /// notes); None where the peak cannot be reset.
-    pub peak_added_bytes: Option<u64>,
+    /// Memory, bytes: in this process, the most its resident size rose
+    /// during one of this count's builds above its size before it (see the
+    /// module's notes); with [`ParallelConfig::command`], the largest peak
+    /// of the count's commands (their `peak_memory_bytes`). None where it
+    /// could not be measured.
+    pub memory_bytes: Option<u64>,
 }
 
 /// One input.
@@ -195,10 +210,9 @@ pub struct BatchRun {
     pub speedup: Spread,
     /// Every output was its input's reference bytes.
     pub identical: bool,
-    /// The most the process's resident size rose above its size before
-    /// the batch, over this count's batches, bytes; None where the peak
-    /// cannot be reset.
-    pub peak_added_bytes: Option<u64>,
+    /// Memory, bytes, as [`ThreadRun::memory_bytes`], of the count's
+    /// batches.
+    pub memory_bytes: Option<u64>,
 }
 
 /// The whole set built as one batch.
@@ -221,6 +235,9 @@ pub struct ParallelReport {
     pub inputs: Vec<InputResult>,
     /// The batch of every input that built, when there were two or more.
     pub batch: Option<BatchResult>,
+    /// Why there is no batch although two inputs or more built.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub batch_note: Option<String>,
     /// Inputs that could not be built: (name, error).
     pub failed: Vec<(String, String)>,
     /// Wall time of the run, s.
@@ -263,18 +280,106 @@ fn remove_if_present(path: &Path) -> Result<()> {
 }
 
 /// Builds `input` into `output` with a pool of `threads` threads, as the
-/// command line does, after removing `output`.
-fn build_once(input: &Path, output: &Path, threads: usize) -> Result<BuildOutput> {
+/// command line does, after removing `output`: in this process, or with
+/// `command` as that binary's `build` command.
+fn build_once(
+    input: &Path,
+    output: &Path,
+    threads: usize,
+    command: Option<&Path>,
+) -> Result<Built> {
     remove_if_present(output)?;
+    if let Some(exe) = command {
+        let args = [input.as_os_str(), "-o".as_ref(), output.as_os_str()];
+        let json = run_build_command(exe, &args, threads, input)?;
+        return built_from_summary(&json)
+            .ok_or_else(|| Error::input(input, "the build's JSON summary lacks its timings"));
+    }
     let cfg = BuildConfig::default();
-    build_batch(
-        &[input.to_path_buf()],
-        &[output.to_path_buf()],
-        &cfg,
-        threads,
-    )
-    .pop()
-    .expect("one result per input")
+    let (o, memory) = with_memory_added(|| {
+        build_batch(
+            &[input.to_path_buf()],
+            &[output.to_path_buf()],
+            &cfg,
+            threads,
+        )
+        .pop()
+        .expect("one result per input")
+    });
+    let o = o?;
+    Ok(Built {
+        timings: o.timings,
+        triangles: o.header.meshes.iter().map(|m| m.stats.triangles).sum(),
+        file_bytes: o.file_bytes,
+        memory,
+    })
+}
+
+/// Runs `work` with this process's peak memory reset before it (to its
+/// resident size then), and returns how far the peak rose (None where the
+/// peak cannot be reset or read).
+fn with_memory_added<T>(work: impl FnOnce() -> T) -> (T, Option<u64>) {
+    use crate::build::{peak_memory_bytes, reset_peak_memory};
+    let start = reset_peak_memory().then(peak_memory_bytes).flatten();
+    let out = work();
+    let added = start
+        .zip(peak_memory_bytes())
+        .map(|(start, peak)| peak.saturating_sub(start));
+    (out, added)
+}
+
+/// Runs `exe build ARGS --threads N --timings --json --quiet` and returns
+/// its JSON summary; a failure names `what` (the input, or the batch's
+/// directory) with the command's message.
+fn run_build_command(
+    exe: &Path,
+    args: &[&std::ffi::OsStr],
+    threads: usize,
+    what: &Path,
+) -> Result<serde_json::Value> {
+    let out = std::process::Command::new(exe)
+        .arg("build")
+        .args(args)
+        .args([
+            "--threads",
+            &threads.to_string(),
+            "--timings",
+            "--json",
+            "--quiet",
+        ])
+        .output()
+        .map_err(|e| Error::io(exe, e))?;
+    if !out.status.success() {
+        return Err(Error::input(
+            what,
+            format!(
+                "`{} build` failed: {}",
+                exe.display(),
+                String::from_utf8_lossy(&out.stderr).trim()
+            ),
+        ));
+    }
+    serde_json::from_slice(&out.stdout)
+        .map_err(|e| Error::input(what, format!("the build's JSON summary: {e}")))
+}
+
+/// The timings, size and peak memory of a `build --timings --json` summary.
+fn built_from_summary(v: &serde_json::Value) -> Option<Built> {
+    let t = &v["timings_ms"];
+    let ms = |k: &str| t[k].as_f64();
+    Some(Built {
+        timings: Timings {
+            load: ms("load")?,
+            weld: ms("weld")?,
+            topology: ms("topology")?,
+            layout: ms("layout")?,
+            write: ms("write")?,
+            total: ms("total")?,
+        },
+        triangles: v["triangles"].as_u64()?,
+        file_bytes: v["file_bytes"].as_u64()?,
+        memory: v["peak_memory_bytes"].as_u64(),
+    })
 }
 
 /// The counts of round `r`: ascending in even rounds, descending in odd.
@@ -296,33 +401,22 @@ struct Samples {
     topology: Vec<f64>,
     layout_write: Vec<f64>,
     identical: bool,
-    peak: Peak,
+    /// Each build's memory ([`ThreadRun::memory_bytes`]).
+    memory: Vec<Option<u64>>,
 }
 
-/// The most the resident size rose during one of a count's builds, above
-/// its size just before it; None once a build's could not be measured.
-#[derive(Clone, Copy)]
-struct Peak(Option<u64>);
-
-impl Default for Peak {
-    fn default() -> Self {
-        Peak(Some(0))
-    }
+/// The largest of `memory`, or None if one was not measured.
+fn largest(memory: &[Option<u64>]) -> Option<u64> {
+    memory.iter().try_fold(0, |most, m| m.map(|m| most.max(m)))
 }
 
-impl Peak {
-    /// Runs `build` with the process's peak reset before it (to its
-    /// resident size then), and takes in how far the peak rose.
-    fn measure<T>(&mut self, build: impl FnOnce() -> T) -> T {
-        use crate::build::{peak_memory_bytes, reset_peak_memory};
-        let start = reset_peak_memory().then(peak_memory_bytes).flatten();
-        let out = build();
-        self.0 = match (self.0, start, peak_memory_bytes()) {
-            (Some(most), Some(start), Some(peak)) => Some(most.max(peak.saturating_sub(start))),
-            _ => None,
-        };
-        out
-    }
+/// What the bench reads of one build.
+struct Built {
+    timings: Timings,
+    triangles: u64,
+    file_bytes: u64,
+    /// As [`ThreadRun::memory_bytes`], of this build.
+    memory: Option<u64>,
 }
 
 impl Samples {
@@ -333,7 +427,9 @@ impl Samples {
         }
     }
 
-    fn push(&mut self, t: &Timings) {
+    fn push(&mut self, b: &Built) {
+        let t = &b.timings;
+        self.memory.push(b.memory);
         self.whole.push(t.total);
         self.after.push(t.weld + t.topology + t.layout + t.write);
         self.weld.push(t.weld);
@@ -355,6 +451,7 @@ fn checked(cfg: &ParallelConfig) -> Result<ParallelConfig> {
     Ok(ParallelConfig {
         threads,
         rounds: cfg.rounds.max(1),
+        command: cfg.command.clone(),
     })
 }
 
@@ -375,7 +472,9 @@ pub fn run(
     let mut built: Vec<(PathBuf, [u8; 32])> = Vec::new();
     for input in inputs {
         let name = file_name(input);
-        let first = match build_once(input, &out, 1) {
+        let command = cfg.command.as_deref();
+        let started = Instant::now();
+        let first = match build_once(input, &out, 1, command) {
             Ok(o) => o,
             Err(e) => {
                 progress(&format!("{name}: skipped ({e})"));
@@ -384,13 +483,13 @@ pub fn run(
             }
         };
         let reference = file_sha256(&out)?;
-        let rounds = rounds_for(first.elapsed, cfg.rounds);
+        let rounds = rounds_for(started.elapsed(), cfg.rounds);
         let mut samples: Vec<Samples> = cfg.threads.iter().map(|_| Samples::new()).collect();
         for r in 0..rounds {
             for t in round_order(&cfg.threads, r) {
                 let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
-                let o = samples[i].peak.measure(|| build_once(input, &out, t))?;
-                samples[i].push(&o.timings);
+                let o = build_once(input, &out, t, command)?;
+                samples[i].push(&o);
                 if file_sha256(&out)? != reference {
                     samples[i].identical = false;
                 }
@@ -410,7 +509,7 @@ pub fn run(
         results.push(InputResult {
             input: name,
             rounds,
-            triangles: first.header.meshes.iter().map(|m| m.stats.triangles).sum(),
+            triangles: first.triangles,
             file_bytes: first.file_bytes,
             output_sha256: crate::report::hex(&reference),
             runs,
@@ -418,16 +517,27 @@ pub fn run(
         built.push((input.clone(), reference));
     }
     remove_if_present(&out)?;
-    let batch = if built.len() >= 2 {
-        Some(run_batch(&built, &cfg, work_dir, progress)?)
-    } else {
+    // As commands, a batch of inputs that share a stem would be refused,
+    // as the command line refuses it.
+    let built_paths: Vec<PathBuf> = built.iter().map(|(p, _)| p.clone()).collect();
+    let mut batch_note = None;
+    let batch = if built.len() < 2 {
         None
+    } else if let (Some(_), Err(e)) = (
+        &cfg.command,
+        crate::build::batch_outputs(&built_paths, Path::new("DIR")),
+    ) {
+        batch_note = Some(format!("not measured as one command: {e}"));
+        None
+    } else {
+        Some(run_batch(&built, &cfg, work_dir, progress)?)
     };
     Ok(ParallelReport {
         config: cfg,
         cores: cores(),
         inputs: results,
         batch,
+        batch_note,
         failed,
         seconds: start.elapsed().as_secs_f64(),
     })
@@ -451,7 +561,7 @@ fn thread_runs(counts: &[usize], samples: &[Samples]) -> Vec<ThreadRun> {
                 speedup: after.speedup_from(base.0),
                 whole_speedup: whole.speedup_from(base.1),
                 identical: s.identical,
-                peak_added_bytes: s.peak.0,
+                memory_bytes: largest(&s.memory),
             }
         })
         .collect()
@@ -468,16 +578,20 @@ fn run_batch(
     let dir = work_dir.join("batch");
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let inputs: Vec<PathBuf> = built.iter().map(|(p, _)| p.clone()).collect();
-    // Numbered, not named by stem as the command line names them: inputs
-    // with the same stem (a model as .obj and as .glb) can be measured
-    // together, and an output's name is not in its bytes.
-    let outputs: Vec<PathBuf> = (0..inputs.len())
-        .map(|i| dir.join(format!("{i}.svpk")))
-        .collect();
+    // In this process numbered, not named by stem as the command line
+    // names them: inputs with the same stem (a model as .obj and as .glb)
+    // can be measured together, and an output's name is not in its bytes.
+    // As a command, by stem: `run` measures no such batch then.
+    let outputs: Vec<PathBuf> = match &cfg.command {
+        Some(_) => crate::build::batch_outputs(&inputs, &dir)?,
+        None => (0..inputs.len())
+            .map(|i| dir.join(format!("{i}.svpk")))
+            .collect(),
+    };
     let build = BuildConfig::default();
     let mut wall: Vec<Vec<f64>> = vec![Vec::new(); cfg.threads.len()];
     let mut identical = vec![true; cfg.threads.len()];
-    let mut peaks = vec![Peak::default(); cfg.threads.len()];
+    let mut memory: Vec<Vec<Option<u64>>> = vec![Vec::new(); cfg.threads.len()];
     for r in 0..cfg.rounds {
         for t in round_order(&cfg.threads, r) {
             let i = cfg.threads.iter().position(|&c| c == t).expect("a count");
@@ -485,10 +599,30 @@ fn run_batch(
                 remove_if_present(o)?;
             }
             let start = Instant::now();
-            let results = peaks[i].measure(|| build_batch(&inputs, &outputs, &build, t));
+            let used = if let Some(exe) = &cfg.command {
+                let mut args: Vec<&std::ffi::OsStr> =
+                    inputs.iter().map(|l| l.as_os_str()).collect();
+                args.extend(["-o".as_ref(), dir.as_os_str()]);
+                let json = run_build_command(exe, &args, t, &dir)?;
+                // An array of {input, output, ok, summary}; each summary's
+                // peak is the process's so far.
+                json.as_array().and_then(|items| {
+                    items.iter().try_fold(0, |most, item| {
+                        let peak = item["summary"]["peak_memory_bytes"].as_u64()?;
+                        Some(peak.max(most))
+                    })
+                })
+            } else {
+                let (results, added) =
+                    with_memory_added(|| build_batch(&inputs, &outputs, &build, t));
+                for res in results {
+                    res?;
+                }
+                added
+            };
             wall[i].push(start.elapsed().as_secs_f64() * 1e3);
-            for (res, (o, (_, reference))) in results.into_iter().zip(outputs.iter().zip(built)) {
-                res?;
+            memory[i].push(used);
+            for (o, (_, reference)) in outputs.iter().zip(built) {
                 if file_sha256(o)? != *reference {
                     identical[i] = false;
                 }
@@ -502,15 +636,15 @@ fn run_batch(
     let runs: Vec<BatchRun> = cfg
         .threads
         .iter()
-        .zip(wall.iter().zip(identical).zip(peaks))
-        .map(|(&threads, ((w, identical), peak))| {
+        .zip(wall.iter().zip(identical).zip(&memory))
+        .map(|(&threads, ((w, identical), memory))| {
             let wall_ms = Spread::of(w);
             BatchRun {
                 threads,
                 wall_ms,
                 speedup: wall_ms.speedup_from(base),
                 identical,
-                peak_added_bytes: peak.0,
+                memory_bytes: largest(memory),
             }
         })
         .collect();
@@ -571,9 +705,14 @@ fn output_word(identical: bool) -> &'static str {
 pub fn to_markdown(r: &ParallelReport) -> String {
     let mut o = String::new();
     let base = r.config.threads[0];
+    let memory = if r.config.command.is_some() {
+        "peak memory"
+    } else {
+        "memory added"
+    };
     let _ = writeln!(
         o,
-        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. \"memory added\" is the most this process's resident size rose during one of the count's builds, above its size before it. \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
+        "Builds with each thread count as `svpack build --threads N` runs them (at least {} rounds, more for short builds, the counts taking turns; {} core{} here). Times are fastest / median ms; \"after parsing\" is weld + topology + layout + write; speed-ups are against {base} thread{}, efficiency is the fastest speed-up per thread{}. {} \"output\" says whether every build wrote the bytes of the first one-thread build.\n",
         r.config.rounds,
         r.cores,
         if r.cores == 1 { "" } else { "s" },
@@ -582,6 +721,11 @@ pub fn to_markdown(r: &ParallelReport) -> String {
             ""
         } else {
             " over the first count's"
+        },
+        if r.config.command.is_some() {
+            "Every build ran as a command of its own (`svpack build --timings --json`), as a pipeline runs one command per model; \"peak memory\" is the largest peak of the count's commands."
+        } else {
+            "Every build ran in this one process; \"memory added\" is the most its resident size rose during one of the count's builds, above its size before it."
         },
     );
     for i in &r.inputs {
@@ -595,7 +739,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
         );
         let _ = writeln!(
             o,
-            "| threads | whole build | after parsing | weld | topology | layout + write | speed-up after parsing | speed-up whole | efficiency | memory added, MiB | output |"
+            "| threads | whole build | after parsing | weld | topology | layout + write | speed-up after parsing | speed-up whole | efficiency | {memory}, MiB | output |"
         );
         let _ = writeln!(o, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
         for run in &i.runs {
@@ -613,7 +757,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
                 x(run.speedup),
                 x(run.whole_speedup),
                 run.speedup.fastest * base as f64 / run.threads as f64,
-                mib(run.peak_added_bytes),
+                mib(run.memory_bytes),
                 output_word(run.identical),
             );
         }
@@ -628,7 +772,7 @@ pub fn to_markdown(r: &ParallelReport) -> String {
         );
         let _ = writeln!(
             o,
-            "| threads | batch | speed-up | efficiency | memory added, MiB | outputs |"
+            "| threads | batch | speed-up | efficiency | {memory}, MiB | outputs |"
         );
         let _ = writeln!(o, "|---:|---:|---:|---:|---:|---|");
         for run in &b.runs {
@@ -641,11 +785,14 @@ pub fn to_markdown(r: &ParallelReport) -> String {
                 run.speedup.fastest,
                 run.speedup.median,
                 run.speedup.fastest * base as f64 / run.threads as f64,
-                mib(run.peak_added_bytes),
+                mib(run.memory_bytes),
                 output_word(run.identical),
             );
         }
         o.push('\n');
+    }
+    if let Some(note) = &r.batch_note {
+        let _ = writeln!(o, "The batch: {note}.\n");
     }
     for (name, e) in &r.failed {
         let _ = writeln!(o, "- {name}: not measured ({e})");
@@ -788,6 +935,7 @@ mod tests {
         let c = checked(&ParallelConfig {
             threads: vec![4, 1, 2, 4],
             rounds: 0,
+            command: None,
         })
         .unwrap();
         assert_eq!((c.threads.as_slice(), c.rounds), (&[1, 2, 4][..], 1));
@@ -795,6 +943,7 @@ mod tests {
             let cfg = ParallelConfig {
                 threads: bad,
                 rounds: 3,
+                command: None,
             };
             assert!(checked(&cfg).is_err());
         }
@@ -831,7 +980,7 @@ mod tests {
             speedup: Spread::default(),
             whole_speedup: Spread::default(),
             identical,
-            peak_added_bytes: None,
+            memory_bytes: None,
         };
         let input = |name: &str, runs| InputResult {
             input: name.into(),
@@ -846,7 +995,7 @@ mod tests {
             wall_ms: Spread::default(),
             speedup: Spread::default(),
             identical,
-            peak_added_bytes: Some(3 << 20),
+            memory_bytes: Some(3 << 20),
         };
         let mut r = ParallelReport {
             config: ParallelConfig::default(),
@@ -859,6 +1008,7 @@ mod tests {
                 inputs: vec!["a".into(), "b".into()],
                 runs: vec![batch_run(1, true), batch_run(2, true)],
             }),
+            batch_note: None,
             failed: Vec::new(),
             seconds: 0.0,
         };

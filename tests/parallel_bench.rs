@@ -104,7 +104,7 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
         }
         let added: Vec<u64> = runs
             .iter()
-            .map(|x| x["peak_added_bytes"].as_u64().unwrap())
+            .map(|x| x["memory_bytes"].as_u64().unwrap())
             .collect();
         peaks.push(added);
         // Speed-ups are against the first count: 1 for it, by definition.
@@ -135,7 +135,7 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
             (x["threads"].as_u64(), &x["identical"]),
             (Some(t), &Value::Bool(true))
         );
-        assert!(x["peak_added_bytes"].as_u64().unwrap() > 0, "{x}");
+        assert!(x["memory_bytes"].as_u64().unwrap() > 0, "{x}");
     }
     let md = std::fs::read_to_string(out.join("parallel.md")).unwrap();
     assert!(md.contains("**The 2 inputs as one batch**"), "{md}");
@@ -151,6 +151,70 @@ fn the_parallel_bench_measures_every_count_and_checks_the_outputs() {
         .collect();
     left.sort();
     assert_eq!(left, ["parallel.json", "parallel.md", "parallel.svg"]);
+}
+
+/// `--fresh-process`: every build runs as a command of its own, whose
+/// summary gives the times and the peak memory; the outputs are checked as
+/// in this process, and the batch runs as `svpack build A B -o DIR`. Two
+/// inputs of one stem, which that command refuses, get no batch and a
+/// note, not a failure. Caught: the flag left unused (the builds ran in
+/// this process); the stems not checked (the batch's command failed, and
+/// the run with it).
+#[test]
+fn fresh_process_runs_each_build_as_a_command() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = common::torus(tmp.path(), 60, 0, 0.5);
+    let b = common::torus(tmp.path(), 30, 2, 0.3);
+    let out = tmp.path().join("bench");
+    svpack()
+        .args(["bench", "--parallel", "--fresh-process"])
+        .args(["--thread-counts", "1,2", "--reps", "2", "--out"])
+        .arg(&out)
+        .arg(&a)
+        .arg(&b)
+        .assert()
+        .code(0);
+    let r: Value =
+        serde_json::from_slice(&std::fs::read(out.join("parallel.json")).unwrap()).unwrap();
+    let exe = r["config"]["command"].as_str().unwrap();
+    assert!(std::path::Path::new(exe).is_file(), "{exe}");
+    for (row, input) in r["inputs"].as_array().unwrap().iter().zip([&a, &b]) {
+        let (sha, summary) = built(tmp.path(), input, "1");
+        assert_eq!(row["output_sha256"], sha.as_str());
+        assert_eq!(row["triangles"], summary["triangles"]);
+        for x in row["runs"].as_array().unwrap() {
+            assert_eq!(x["identical"], true, "{x}");
+            assert!(x["after_parsing_ms"]["fastest"].as_f64().unwrap() > 0.0);
+            // A command's peak: the whole process's, at least its own
+            // start.
+            assert!(x["memory_bytes"].as_u64().unwrap() > 1 << 20, "{x}");
+        }
+    }
+    for x in r["batch"]["runs"].as_array().unwrap() {
+        assert_eq!(x["identical"], true, "{x}");
+    }
+    let md = std::fs::read_to_string(out.join("parallel.md")).unwrap();
+    assert!(md.contains("ran as a command of its own"), "{md}");
+    assert!(md.contains("| peak memory, MiB |"), "{md}");
+    // One stem twice: no batch, a note, exit 0.
+    std::fs::create_dir(tmp.path().join("c")).unwrap();
+    let c = tmp.path().join("c").join(a.file_name().unwrap());
+    std::fs::copy(&b, &c).unwrap();
+    let out = tmp.path().join("bench2");
+    svpack()
+        .args(["bench", "--parallel", "--fresh-process"])
+        .args(["--thread-counts", "1", "--reps", "1", "--out"])
+        .arg(&out)
+        .arg(&a)
+        .arg(&c)
+        .assert()
+        .code(0)
+        .stdout(predicates::str::contains(
+            "The batch: not measured as one command",
+        ));
+    let r: Value =
+        serde_json::from_slice(&std::fs::read(out.join("parallel.json")).unwrap()).unwrap();
+    assert!(r["batch"].is_null() && r["batch_note"].is_string(), "{r}");
 }
 
 /// A count of 0, a bad list, and `--parallel` without inputs are refused
