@@ -470,9 +470,9 @@ pub fn run(
     let mut failed = Vec::new();
     // (input path, its reference digest) of every input that built.
     let mut built: Vec<(PathBuf, [u8; 32])> = Vec::new();
+    let command = cfg.command.as_deref();
     for input in inputs {
         let name = file_name(input);
-        let command = cfg.command.as_deref();
         let started = Instant::now();
         let first = match build_once(input, &out, 1, command) {
             Ok(o) => o,
@@ -517,20 +517,13 @@ pub fn run(
         built.push((input.clone(), reference));
     }
     remove_if_present(&out)?;
-    // As commands, a batch of inputs that share a stem would be refused,
-    // as the command line refuses it.
-    let built_paths: Vec<PathBuf> = built.iter().map(|(p, _)| p.clone()).collect();
-    let mut batch_note = None;
-    let batch = if built.len() < 2 {
-        None
-    } else if let (Some(_), Err(e)) = (
-        &cfg.command,
-        crate::build::batch_outputs(&built_paths, Path::new("DIR")),
-    ) {
-        batch_note = Some(format!("not measured as one command: {e}"));
-        None
+    let (batch, batch_note) = if built.len() < 2 {
+        (None, None)
     } else {
-        Some(run_batch(&built, &cfg, work_dir, progress)?)
+        match run_batch(&built, &cfg, work_dir, progress)? {
+            Ok(b) => (Some(b), None),
+            Err(note) => (None, Some(note)),
+        }
     };
     Ok(ParallelReport {
         config: cfg,
@@ -568,26 +561,34 @@ fn thread_runs(counts: &[usize], samples: &[Samples]) -> Vec<ThreadRun> {
 }
 
 /// The inputs of `built` as one batch per count per round, into
-/// `work_dir/batch`, each output checked against its reference.
+/// `work_dir/batch`, each output checked against its reference; or, as
+/// commands, why the command line would refuse the batch (inputs that
+/// share a stem).
 fn run_batch(
     built: &[(PathBuf, [u8; 32])],
     cfg: &ParallelConfig,
     work_dir: &Path,
     progress: &mut dyn FnMut(&str),
-) -> Result<BatchResult> {
+) -> Result<std::result::Result<BatchResult, String>> {
     let dir = work_dir.join("batch");
-    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let inputs: Vec<PathBuf> = built.iter().map(|(p, _)| p.clone()).collect();
     // In this process numbered, not named by stem as the command line
     // names them: inputs with the same stem (a model as .obj and as .glb)
     // can be measured together, and an output's name is not in its bytes.
-    // As a command, by stem: `run` measures no such batch then.
+    // As a command, by stem, as the command line names them.
     let outputs: Vec<PathBuf> = match &cfg.command {
-        Some(_) => crate::build::batch_outputs(&inputs, &dir)?,
+        Some(_) => match crate::build::batch_outputs(&inputs, Path::new("DIR")) {
+            Ok(named) => named
+                .iter()
+                .map(|o| dir.join(o.file_name().expect("a file name")))
+                .collect(),
+            Err(e) => return Ok(Err(format!("not measured as one command: {e}"))),
+        },
         None => (0..inputs.len())
             .map(|i| dir.join(format!("{i}.svpk")))
             .collect(),
     };
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let build = BuildConfig::default();
     let mut wall: Vec<Vec<f64>> = vec![Vec::new(); cfg.threads.len()];
     let mut identical = vec![true; cfg.threads.len()];
@@ -658,10 +659,10 @@ fn run_batch(
             run.identical,
         ));
     }
-    Ok(BatchResult {
+    Ok(Ok(BatchResult {
         inputs: built.iter().map(|(p, _)| file_name(p)).collect(),
         runs,
-    })
+    }))
 }
 
 /// A progress line: "LABEL: N threads: WHAT fastest / median ms (speed-ups)",
