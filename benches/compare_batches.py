@@ -28,7 +28,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rebuild import run  # noqa: E402
+from rebuild import run, spread  # noqa: E402
 
 
 def option(args, name, default):
@@ -82,8 +82,7 @@ def main():
         print("| binary | wall ms, fastest / median | page faults (median) | peak memory (MiB) |")
         print("|---|---:|---:|---:|")
         for name in binaries:
-            t = times[name]
-            print(f"| {name} | {min(t):.0f} / {statistics.median(t):.0f} "
+            print(f"| {name} | {spread(times[name])} "
                   f"| {statistics.median(faults[name]):.0f} | {peak[name]:.1f} |")
     finally:
         shutil.rmtree(work, ignore_errors=True)

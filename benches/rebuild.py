@@ -37,6 +37,11 @@ import tempfile
 import time
 
 
+def spread(times):
+    """"FASTEST / MEDIAN" of a list of ms, rounded to whole ms."""
+    return f"{min(times):.0f} / {statistics.median(times):.0f}"
+
+
 def run(binary, inputs, out, jobs):
     """Wall ms, minor faults and peak memory (MiB) of one command."""
     extra = ["--jobs", jobs, "--threads", jobs] if jobs else []
@@ -110,8 +115,7 @@ def main():
         print("|---|---:|---:|---:|---:|")
         for name in ("old", "new"):
             t = times[name]
-            print(f"| {name} | {min(t['fresh']):.0f} / {statistics.median(t['fresh']):.0f} "
-                  f"| {min(t['over']):.0f} / {statistics.median(t['over']):.0f} "
+            print(f"| {name} | {spread(t['fresh'])} | {spread(t['over'])} "
                   f"| {statistics.median(faults[name]):.0f} | {peak[name]:.1f} |")
     finally:
         shutil.rmtree(work, ignore_errors=True)
