@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Two svpack binaries building the same inputs as one batch, alternated.
 
-Usage: python3 benches/compare_batches.py [--jobs J] [--rounds R] OLD NEW INPUT...
+Usage: python3 benches/compare_batches.py [--jobs J] [--rounds R]
+       [--new-args "ARGS"] OLD NEW INPUT...
 
 Each round runs `build INPUT... -o DIR --quiet` with each binary into an
 empty directory (`sync` first), the binaries swapping order every round
@@ -11,7 +12,10 @@ distinct names first, so that inputs of one stem (a model as .obj and as
 .glb) can share a batch. Prints, per binary, the fastest and the median
 wall time of the command, the median number of page faults and the
 largest peak memory; checks that both binaries wrote the same bytes for
-every input (exit status 1 otherwise).
+every input (exit status 1 otherwise). With --new-args, NEW's command
+gets ARGS (split at spaces) too: OLD and NEW may then be one binary, to
+compare an option against its absence (`--new-args "--max-memory 400M"`,
+benches/ROUNDS.md, Fifty-first round).
 
 Why: `build_batch` decides the order in which a batch's inputs start and
 which thread builds which; that shows in the batch's wall time alone, as
@@ -45,6 +49,7 @@ def main():
     args = sys.argv[1:]
     jobs = option(args, "--jobs", None)
     rounds = int(option(args, "--rounds", "8"))
+    new_args = option(args, "--new-args", "").split()
     if len(args) < 3:
         sys.exit(__doc__)
     binaries = {"old": args[0], "new": args[1]}
@@ -68,7 +73,8 @@ def main():
             for name in order:
                 shutil.rmtree(outs[name], ignore_errors=True)
                 subprocess.run(["sync"], check=True)
-                wall, minflt, rss = run(binaries[name], inputs, outs[name], jobs)
+                extra = new_args if name == "new" else []
+                wall, minflt, rss = run(binaries[name], inputs, outs[name], jobs, extra)
                 times[name].append(wall)
                 faults[name].append(minflt)
                 peak[name] = max(peak[name], rss)
@@ -78,7 +84,8 @@ def main():
                 print(f"outputs differ: {a} {b}")
                 ok = False
         print(f"{len(sources)} inputs as one batch, {rounds} rounds, "
-              f"{'--jobs ' + jobs if jobs else 'one job per core'}")
+              f"{'--jobs ' + jobs if jobs else 'one job per core'}"
+              f"{'; new with ' + ' '.join(new_args) if new_args else ''}")
         print("| binary | wall ms, fastest / median | page faults (median) | peak memory (MiB) |")
         print("|---|---:|---:|---:|")
         for name in binaries:

@@ -42,11 +42,12 @@ def spread(times):
     return f"{min(times):.0f} / {statistics.median(times):.0f}"
 
 
-def run(binary, inputs, out, jobs):
-    """Wall ms, minor faults and peak memory (MiB) of one command."""
+def run(binary, inputs, out, jobs, args=()):
+    """Wall ms, minor faults and peak memory (MiB) of one command, with
+    `args` added to it."""
     extra = ["--jobs", jobs, "--threads", jobs] if jobs else []
     start = time.perf_counter()
-    p = subprocess.Popen([binary, "build", *inputs, "-o", out, "--quiet", *extra],
+    p = subprocess.Popen([binary, "build", *inputs, "-o", out, "--quiet", *extra, *args],
                          stdout=subprocess.DEVNULL)
     _, status, usage = os.wait4(p.pid, 0)
     wall = (time.perf_counter() - start) * 1e3

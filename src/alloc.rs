@@ -215,6 +215,11 @@ pub const CACHE_SLOTS: usize = 16;
 /// block is unmapped at once.
 pub const CACHE_BYTES: usize = 256 << 20;
 
+/// Most bytes of freed large blocks kept now: [`CACHE_BYTES`], or less
+/// while a [`KeepFreed::within`] guard lives.
+static CACHE_LIMIT: std::sync::atomic::AtomicUsize =
+    std::sync::atomic::AtomicUsize::new(CACHE_BYTES);
+
 /// Number of live [`KeepFreed`] guards.
 static KEEPERS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
@@ -224,14 +229,28 @@ static KEEPERS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize:
 /// threads at once (a batch builds several inputs in parallel).
 #[derive(Debug)]
 #[must_use = "blocks are kept only while the guard lives"]
-pub struct KeepFreed(());
+pub struct KeepFreed {
+    /// The cache's limit to set back on drop ([`KeepFreed::within`]).
+    restore: Option<usize>,
+}
 
 impl KeepFreed {
     /// Starts keeping freed large blocks, until the guard (and every other
     /// live guard) is dropped.
     pub fn new() -> Self {
         KEEPERS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-        KeepFreed(())
+        KeepFreed { restore: None }
+    }
+
+    /// [`KeepFreed::new`], keeping at most `limit` bytes (and never more
+    /// than [`CACHE_BYTES`]) until this guard drops: what a batch under a
+    /// memory budget allows its kept blocks (`build::BatchConfig`).
+    pub fn within(limit: usize) -> Self {
+        use std::sync::atomic::Ordering::SeqCst;
+        let old = CACHE_LIMIT.swap(limit.min(CACHE_BYTES), SeqCst);
+        let mut guard = Self::new();
+        guard.restore = Some(old);
+        guard
     }
 }
 
@@ -243,6 +262,9 @@ impl Default for KeepFreed {
 
 impl Drop for KeepFreed {
     fn drop(&mut self) {
+        if let Some(limit) = self.restore {
+            CACHE_LIMIT.store(limit, std::sync::atomic::Ordering::SeqCst);
+        }
         if KEEPERS.fetch_sub(1, std::sync::atomic::Ordering::SeqCst) == 1 {
             release();
         }
@@ -268,7 +290,8 @@ static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
 
 /// Keeps the freed block `p` (a mapping of `span` bytes) for reuse if a
 /// [`KeepFreed`] guard lives, joined with the kept blocks it touches (see
-/// below), when a slot is free and the cache stays within [`CACHE_BYTES`].
+/// below), when a slot is free and the cache stays within its limit
+/// ([`CACHE_BYTES`], or a [`KeepFreed::within`] guard's).
 /// Returns the block when it is not kept (the cache then unchanged), for
 /// the caller to unmap.
 ///
@@ -316,7 +339,7 @@ fn keep(p: *mut u8, span: usize) -> Option<(*mut u8, usize)> {
     let end = after.map_or(hi, |i| cache[i].0 + cache[i].1);
     let held: usize = cache.iter().map(|c| c.1).sum();
     // The neighbours' bytes are counted in `held` already.
-    if held + span > CACHE_BYTES {
+    if held + span > CACHE_LIMIT.load(std::sync::atomic::Ordering::Relaxed) {
         return Some((p, span));
     }
     for i in before.into_iter().chain(after) {

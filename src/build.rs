@@ -736,79 +736,186 @@ pub fn batch_order(inputs: &[std::path::PathBuf]) -> Vec<usize> {
     order
 }
 
+/// Most memory a build is expected to add at its peak per byte of its soup
+/// ([`load::soup_estimate`]), in halves: 4.5 bytes. Measured peaks with two
+/// threads, less the process's 6 MiB before the build: the dragon's GLB
+/// 53.6 MiB from a 15.0 MiB soup (3.6 a byte), its OBJ 64.6 MiB from 31.8
+/// MiB of text (4.1 a byte of half the text, which the load holds beside
+/// the parsed arrays), the 5M scene's 393 MiB (4.0) (benches/ROUNDS.md,
+/// Fifty-first round; `python3 benches/memory_model.py` measures them).
+const PEAK_HALVES_PER_SOUP_BYTE: u64 = 9;
+
+/// Memory a build adds at its peak whatever its size: the pool's buffers,
+/// huge-page rounding of its few large blocks (2 MiB each at most), and
+/// small inputs' tables. The shared models under 5 MiB of soup added
+/// 0.1–12 MiB with two threads.
+const PEAK_FIXED: u64 = 16 << 20;
+
+/// Memory a build adds per thread of its pool: each thread's fill buffers.
+/// 2CylinderEngine's peak rose from 13.0 to 25.7 MiB from 1 to 8 threads
+/// (`--threads 8` on 2 cores), the 5M scene's from 325 to 387 MiB.
+const PEAK_PER_THREAD: u64 = 2 << 20;
+
+/// What a compressed build holds on top, per byte of soup: the zstd frame
+/// is made in memory from the whole file (`format`), and a file is about 8
+/// bytes per byte of soup (the dragon 119.7 MiB from 15.0, the 5M scene
+/// 687.6 from 86.6). With two threads the dragon's peak rose by 155 MiB
+/// with `--compress`, the 5M scene's by 682 MiB.
+const FRAME_PER_SOUP_BYTE: u64 = 8;
+
+/// What a compressed build holds on top whatever its size: zstd's workers'
+/// windows and buffers.
+const FRAME_FIXED: u64 = 48 << 20;
+
+/// An estimate of the most memory the build of `input` with `cfg`, on a
+/// pool of `threads` threads, adds to the process, read from the file's
+/// head alone ([`load::soup_estimate`]): 4.5 bytes per byte of soup, 16 MiB,
+/// and 2 MiB per thread, plus 8 bytes per byte of soup and 48 MiB when the
+/// output is compressed. It is meant to be above the build's peak: it was
+/// 1.0–1.6 times the peak added on the dragon and the 5M scene, more on
+/// small inputs (their fixed part). What a batch under a memory budget
+/// counts each input as ([`BatchConfig::max_memory`]).
+pub fn memory_estimate(input: &Path, cfg: &BuildConfig, threads: usize) -> u64 {
+    let soup = load::soup_estimate(input);
+    let mut bytes = (soup.saturating_mul(PEAK_HALVES_PER_SOUP_BYTE) / 2)
+        .saturating_add(PEAK_FIXED)
+        .saturating_add(PEAK_PER_THREAD.saturating_mul(threads.max(1) as u64));
+    if cfg.compress.is_some() {
+        bytes = bytes
+            .saturating_add(soup.saturating_mul(FRAME_PER_SOUP_BYTE))
+            .saturating_add(FRAME_FIXED);
+    }
+    bytes
+}
+
+/// How a batch shares the machine ([`build_batch_with`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BatchConfig {
+    /// Most inputs built at once, each on a loop of the batch's pool of as
+    /// many threads (0: one per core).
+    pub jobs: usize,
+    /// A memory budget in bytes (`build --max-memory`): an input starts
+    /// only while the [`memory_estimate`]s of the builds running, its own
+    /// and the blocks the batch keeps for reuse (a quarter of the budget,
+    /// at most `alloc::CACHE_BYTES`) fit in it, or when nothing else runs
+    /// (an input larger than the budget is built alone). None: no budget.
+    pub max_memory: Option<u64>,
+}
+
+impl BatchConfig {
+    /// `jobs` at once, no memory budget.
+    pub fn jobs(jobs: usize) -> Self {
+        BatchConfig {
+            jobs,
+            max_memory: None,
+        }
+    }
+
+    /// The part of a budget a batch lets its kept blocks hold.
+    fn kept_bytes(budget: u64) -> u64 {
+        (budget / 4).min(crate::alloc::CACHE_BYTES as u64)
+    }
+}
+
 /// Builds every input into its output with up to `jobs` threads (0: all
-/// cores). Each build is independent and its output does not depend on the
-/// thread count, so every output is byte-identical whatever `jobs` is.
-/// Results come back in input order; a failing input does not stop the
-/// others.
-///
-/// With more inputs than jobs, the inputs start in [`batch_order`],
-/// largest first: each of `jobs` loops takes the next input when its last
-/// build ends, and a thread whose loop has run out helps the builds still
-/// running with their parallel passes. Why: a batch lasts at least as long
-/// as its largest build. When the inputs were split in halves in the order
-/// given, the largest could start after others on its thread and then run
-/// on alone, its parse on one thread; and built first, its freed blocks
-/// serve the smaller builds after it (`crate::alloc::KeepFreed`), so a
-/// batch takes fewer fresh pages (benches/ROUNDS.md, Fiftieth round).
+/// cores): [`build_batch_with`] with no memory budget and no callbacks.
 pub fn build_batch(
     inputs: &[std::path::PathBuf],
     outputs: &[std::path::PathBuf],
     cfg: &BuildConfig,
     jobs: usize,
 ) -> Vec<Result<BuildOutput>> {
-    build_batch_with(inputs, outputs, cfg, jobs, &|_, _| {}, &|_| {})
+    build_batch_with(
+        inputs,
+        outputs,
+        cfg,
+        &BatchConfig::jobs(jobs),
+        &|_, _| {},
+        &|_| {},
+    )
 }
 
-/// [`build_batch`], announcing each input's stages to `stage(input index,
-/// stage name)` and each finished input to `done`.
+/// Builds every input into its output, up to `batch.jobs` at once,
+/// announcing each input's stages to `stage(input index, stage name)` and
+/// each finished input to `done`. Each build is independent and its output
+/// does not depend on the thread count or the budget, so every output is
+/// byte-identical whatever `batch` is. Results come back in input order; a
+/// failing input does not stop the others.
+///
+/// With more inputs than jobs, or a memory budget, the inputs start in
+/// [`batch_order`], largest first: each of the batch's loops takes the
+/// first input not yet started that fits the budget when its last build
+/// ends. A loop that finds none ends, and its thread helps the builds still
+/// running with their parallel passes; when a build ends, its loop starts
+/// loops again up to `jobs`, for the inputs that now fit. Why largest
+/// first: a batch lasts at least as long as its largest build. When the
+/// inputs were split in halves in the order given, the largest could start
+/// after others on its thread and then run on alone, its parse on one
+/// thread; and built first, its freed blocks serve the smaller builds
+/// after it (`crate::alloc::KeepFreed`), so a batch takes fewer fresh pages
+/// (benches/ROUNDS.md, Fiftieth round). Why a budget: a batch on many cores
+/// runs that many builds at once, and a machine's memory may hold fewer
+/// (Fifty-first round).
 pub fn build_batch_with(
     inputs: &[std::path::PathBuf],
     outputs: &[std::path::PathBuf],
     cfg: &BuildConfig,
-    jobs: usize,
+    batch: &BatchConfig,
     stage: &(dyn Fn(usize, &'static str) + Sync),
     done: &(dyn Fn(usize) + Sync),
 ) -> Vec<Result<BuildOutput>> {
-    use std::sync::OnceLock;
-    use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
     // One guard for the whole batch: the blocks one input's build frees at
     // its end (its soup, welded mesh and edges) serve the next input's,
     // instead of each build starting from fresh pages (`crate::alloc`).
-    let _keep = crate::alloc::KeepFreed::new();
+    // Under a budget they hold a part of it.
+    let _keep = match batch.max_memory {
+        Some(budget) => crate::alloc::KeepFreed::within(
+            usize::try_from(BatchConfig::kept_bytes(budget)).unwrap_or(usize::MAX),
+        ),
+        None => crate::alloc::KeepFreed::new(),
+    };
     // The old outputs the builds swap out are removed on a thread of the
     // batch's own (`crate::removals`), which every worker of its pool
     // hands them to.
     let remover = crate::removals::Remover::start();
-    let mut pool = rayon::ThreadPoolBuilder::new().num_threads(jobs);
+    let mut pool = rayon::ThreadPoolBuilder::new().num_threads(batch.jobs);
     if let Some(r) = &remover {
         pool = pool.start_handler(r.attach());
     }
     let pool = pool.build();
-    let next = AtomicUsize::new(0);
-    let slots: Vec<OnceLock<Result<BuildOutput>>> =
-        inputs.iter().map(|_| OnceLock::new()).collect();
-    let work = |order: &[usize]| {
-        while let Some(&n) = order.get(next.fetch_add(1, Relaxed)) {
+    let slots: Vec<std::sync::OnceLock<Result<BuildOutput>>> =
+        inputs.iter().map(|_| std::sync::OnceLock::new()).collect();
+    let run = || {
+        let threads = rayon::current_num_threads();
+        let jobs = threads.min(inputs.len());
+        let budget = batch.max_memory.map(|b| b - BatchConfig::kept_bytes(b));
+        // With a loop per input and no budget every build starts at once,
+        // and the estimates (a glTF's JSON read twice) would be spent for
+        // nothing.
+        let (order, cost) = if jobs < inputs.len() || budget.is_some() {
+            let order = batch_order(inputs);
+            let cost = match budget {
+                Some(_) => inputs
+                    .iter()
+                    .map(|i| memory_estimate(i, cfg, threads))
+                    .collect(),
+                None => vec![0; inputs.len()],
+            };
+            (order, cost)
+        } else {
+            ((0..inputs.len()).collect(), vec![0; inputs.len()])
+        };
+        let queue = BatchQueue::new(order, cost, budget, jobs);
+        let build = |n: usize| {
             let r = build_file_with(&inputs[n], &outputs[n], cfg, &|s| stage(n, s));
             done(n);
             let _ = slots[n].set(r);
-        }
-    };
-    let run = || {
-        let loops = rayon::current_num_threads().min(inputs.len());
-        // With a loop per input every build starts at once, and the
-        // estimates (a glTF's JSON read twice) would be spent for nothing.
-        let order = if loops < inputs.len() {
-            batch_order(inputs)
-        } else {
-            (0..inputs.len()).collect()
         };
         rayon::scope(|s| {
-            for _ in 1..loops {
-                s.spawn(|_| work(&order));
+            for _ in 1..jobs {
+                s.spawn(|s| batch_loop(s, &queue, &build));
             }
-            work(&order);
+            batch_loop(s, &queue, &build);
         })
     };
     match pool {
@@ -833,6 +940,111 @@ pub fn build_batch_with(
         }
     }
     results
+}
+
+/// The inputs of a batch waiting to start ([`build_batch_with`]).
+struct BatchQueue {
+    /// Input indices, largest first ([`batch_order`]).
+    order: Vec<usize>,
+    /// Each input's [`memory_estimate`] (0 without a budget).
+    cost: Vec<u64>,
+    /// The budget the running builds' estimates must fit, less the kept
+    /// blocks' part.
+    budget: Option<u64>,
+    /// Most loops at once.
+    jobs: usize,
+    state: std::sync::Mutex<QueueState>,
+}
+
+struct QueueState {
+    /// Every input of `order` before this one has started.
+    next: usize,
+    /// Which inputs have started (by input index).
+    started: Vec<bool>,
+    /// Inputs not started yet.
+    waiting: usize,
+    /// The estimates of the builds running.
+    reserved: u64,
+    /// Builds running.
+    running: usize,
+    /// Loops alive: running a build, or about to ask for one.
+    loops: usize,
+}
+
+impl BatchQueue {
+    /// A queue of the inputs in `order`, each costing `cost[input]`
+    /// against `budget`, for `jobs` loops alive at first.
+    fn new(order: Vec<usize>, cost: Vec<u64>, budget: Option<u64>, jobs: usize) -> Self {
+        let state = QueueState {
+            next: 0,
+            started: vec![false; cost.len()],
+            waiting: cost.len(),
+            reserved: 0,
+            running: 0,
+            loops: jobs,
+        };
+        BatchQueue {
+            order,
+            cost,
+            budget,
+            jobs,
+            state: std::sync::Mutex::new(state),
+        }
+    }
+
+    /// The next input to build: the first in `order` not started that fits
+    /// the budget beside the builds running, or any when none runs. None
+    /// when none fits or none is left; the asking loop then ends.
+    fn take(&self) -> Option<usize> {
+        let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        while st.next < self.order.len() && st.started[self.order[st.next]] {
+            st.next += 1;
+        }
+        let fits = |st: &QueueState, n: usize| match self.budget {
+            Some(budget) => st.running == 0 || st.reserved.saturating_add(self.cost[n]) <= budget,
+            None => true,
+        };
+        let found = self.order[st.next..]
+            .iter()
+            .copied()
+            .find(|&n| !st.started[n] && fits(&st, n));
+        match found {
+            Some(n) => {
+                st.started[n] = true;
+                st.waiting -= 1;
+                st.reserved += self.cost[n];
+                st.running += 1;
+            }
+            None => st.loops -= 1,
+        }
+        found
+    }
+
+    /// Marks input `n`'s build ended, and returns how many loops to start
+    /// beside the caller's for the inputs that may fit now.
+    fn finish(&self, n: usize) -> usize {
+        let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        st.reserved -= self.cost[n];
+        st.running -= 1;
+        if self.budget.is_none() || st.waiting <= 1 {
+            return 0;
+        }
+        // The caller's loop takes one of those waiting itself.
+        let more = (self.jobs - st.loops).min(st.waiting - 1);
+        st.loops += more;
+        more
+    }
+}
+
+/// One loop of a batch: takes inputs from `queue` and builds them until
+/// none fits, starting more loops as builds end and free their budget.
+fn batch_loop<'s>(s: &rayon::Scope<'s>, queue: &'s BatchQueue, build: &'s (dyn Fn(usize) + Sync)) {
+    while let Some(n) = queue.take() {
+        build(n);
+        for _ in 0..queue.finish(n) {
+            s.spawn(|s| batch_loop(s, queue, build));
+        }
+    }
 }
 
 #[cfg(test)]
@@ -877,6 +1089,44 @@ mod tests {
             }
             assert_eq!(bounds(&pos), (lo, hi), "{n} positions");
         }
+    }
+
+    /// A queue's decisions, step by step: inputs 0–3 costing 50, 30, 20 and
+    /// 10 against a budget of 60, three loops. The largest starts with the
+    /// smallest (the only one that fits beside it), the third loop ends;
+    /// when the smallest ends one loop is started again, and finds nothing
+    /// beside the largest; when the largest ends its loop starts one more,
+    /// and the two middle inputs run together. An input above the budget
+    /// runs when nothing else does. Caught: the budget ignored; a build's
+    /// cost not given back when it ends; no loop started again when a
+    /// build ends; an input above the budget never started.
+    #[test]
+    fn a_batch_queue_starts_what_fits_and_restarts_loops() {
+        let q = BatchQueue::new(vec![0, 1, 2, 3], vec![50, 30, 20, 10], Some(60), 3);
+        assert_eq!(q.take(), Some(0));
+        assert_eq!(q.take(), Some(3));
+        assert_eq!(q.take(), None);
+        assert_eq!(q.finish(3), 1, "one loop started again for 1 and 2");
+        assert_eq!(q.take(), None, "neither 1 nor 2 fits beside 0");
+        assert_eq!(q.take(), None, "the loop whose build ended ends too");
+        assert_eq!(q.finish(0), 1);
+        assert_eq!(q.take(), Some(1));
+        assert_eq!(q.take(), Some(2), "1 and 2 together: 50 of 60");
+        assert_eq!(q.finish(1), 0, "nothing waits");
+        assert_eq!(q.take(), None);
+        assert_eq!(q.finish(2), 0);
+        assert_eq!(q.take(), None);
+        // Above the budget alone: it waits for the running build to end.
+        let q = BatchQueue::new(vec![0, 1], vec![100, 10], Some(60), 2);
+        assert_eq!(q.take(), Some(0), "nothing runs: it starts");
+        assert_eq!(q.take(), None, "1 does not fit beside it");
+        assert_eq!(q.finish(0), 0);
+        assert_eq!(q.take(), Some(1));
+        // No budget: the order, whatever the costs.
+        let q = BatchQueue::new(vec![2, 0, 1], vec![0; 3], None, 2);
+        assert_eq!([q.take(), q.take()], [Some(2), Some(0)]);
+        assert_eq!(q.finish(2), 0);
+        assert_eq!([q.take(), q.take()], [Some(1), None]);
     }
 
     /// Two parts of two triangles each over 6 vertices, vertex 5 unused.

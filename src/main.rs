@@ -121,6 +121,14 @@ enum Command {
         /// whatever the value.
         #[arg(long, default_value_t = 0)]
         jobs: usize,
+        /// Memory budget of a batch, as bytes or with a binary unit (K, M,
+        /// G, T: 1024^n; `512M`, `8G`, `1.5GiB`). An input starts only
+        /// while the estimated peaks of the builds running, its own and the
+        /// blocks kept for reuse fit; one larger than the budget is built
+        /// alone. The estimate is read from each file (`--timings` prints
+        /// it); outputs are identical whatever the budget.
+        #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+        max_memory: Option<u64>,
         /// K: most opposite vertices per side instance; edges with more are
         /// split. The sides shader needs 3 + K vertex attributes; the default 5
         /// fits the 8 every WebGL 1 device has.
@@ -318,6 +326,37 @@ enum EvaluatorArg {
     Peciva,
     ReferenceF64,
     Exact,
+}
+
+/// A size in bytes: a number, optionally with a fraction, then an optional
+/// binary unit (K, M, G, T, each 1024 times the last, with an optional
+/// "iB" or "B"; case ignored): `4096`, `512M`, `1.5GiB`.
+fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let bad = || {
+        format!("{s:?} is not a size (a number of bytes, or with K, M, G or T: 512M, 8G, 1.5GiB)")
+    };
+    let value: f64 = number.parse().map_err(|_| bad())?;
+    let unit = unit.trim().to_ascii_lowercase();
+    let shift = match unit.as_str() {
+        "" | "b" => 0,
+        "k" | "kb" | "kib" => 10,
+        "m" | "mb" | "mib" => 20,
+        "g" | "gb" | "gib" => 30,
+        "t" | "tb" | "tib" => 40,
+        _ => return Err(bad()),
+    };
+    let bytes = (value * (1u64 << shift) as f64).round();
+    if !(1.0..1.8e19).contains(&bytes) {
+        return Err(format!(
+            "{s:?}: the size must be at least 1 byte and below 16 EiB"
+        ));
+    }
+    Ok(bytes as u64)
 }
 
 fn parse_light(s: &str) -> Result<[f32; 4], String> {
@@ -573,6 +612,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             inputs,
             output,
             jobs,
+            max_memory,
             max_mult,
             compress,
             compress_level,
@@ -600,7 +640,33 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             } else {
                 vec![output.clone()]
             };
-            let jobs = if jobs == 0 { cli.threads } else { jobs };
+            let batch_cfg = svpack::build::BatchConfig {
+                jobs: if jobs == 0 { cli.threads } else { jobs },
+                max_memory,
+            };
+            // The pool's threads, which each build's estimate counts.
+            let threads = match batch_cfg.jobs {
+                0 => rayon::current_num_threads(),
+                n => n,
+            };
+            let estimate =
+                |input: &std::path::Path| svpack::build::memory_estimate(input, &cfg, threads);
+            if let Some(budget) = max_memory
+                && batch
+                && !cli.quiet
+            {
+                for input in &inputs {
+                    let e = estimate(input);
+                    if e > budget {
+                        eprintln!(
+                            "note: {}: its estimated peak, {}, is above --max-memory {}; it is built with no other build beside it",
+                            input.display(),
+                            svpack::report::human_bytes(e),
+                            svpack::report::human_bytes(budget)
+                        );
+                    }
+                }
+            }
             let bar = progress::for_build(&inputs, cli.quiet);
             let trace_file = trace
                 .as_deref()
@@ -611,7 +677,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                 &inputs,
                 &outputs,
                 &cfg,
-                jobs,
+                &batch_cfg,
                 &|n, stage| bar.stage(&inputs[n], stage),
                 &|_| bar.done_one(),
             );
@@ -635,6 +701,7 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
                         if timings {
                             s.timings_ms = Some(out.timings);
                             s.peak_memory_bytes = svpack::build::peak_memory_bytes();
+                            s.memory_estimate_bytes = Some(estimate(input));
                             s.cold_memory = Some(svpack::alloc::cold_memory_seen());
                         }
                         s.warnings = out.warnings;
@@ -870,6 +937,45 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(1)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_size;
+
+    /// Sizes in bytes and binary units, case ignored, a fraction allowed;
+    /// anything else refused with a message naming the text. Caught: `K`
+    /// taken as 1000; a unit's "iB" not accepted.
+    #[test]
+    fn sizes_take_binary_units() {
+        for (text, bytes) in [
+            ("4096", 4096),
+            ("1b", 1),
+            ("2K", 2048),
+            ("2 KiB", 2048),
+            ("512M", 512 << 20),
+            ("512mb", 512 << 20),
+            ("1.5GiB", 3 << 29),
+            ("8g", 8 << 30),
+            ("1T", 1 << 40),
+        ] {
+            assert_eq!(parse_size(text), Ok(bytes), "{text}");
+        }
+        for text in [
+            "",
+            "M",
+            "1.2.3",
+            "5X",
+            "0",
+            "0.1",
+            "-1G",
+            "1e3",
+            "99999999T",
+        ] {
+            let e = parse_size(text).unwrap_err();
+            assert!(e.contains(&format!("{text:?}")), "{text}: {e}");
         }
     }
 }

@@ -109,6 +109,11 @@ pub struct Summary {
     /// batch, of the whole batch so far).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub peak_memory_bytes: Option<u64>,
+    /// What a batch under `--max-memory` counts this input's build as
+    /// (`build::memory_estimate`, with the pool's threads; `build
+    /// --timings`), to set a budget by.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_estimate_bytes: Option<u64>,
     /// Whether the process met cold memory (`build --timings`): a fresh
     /// huge page slow to fault in, after which fresh buffers got small
     /// pages for a while (`alloc::cold_memory_seen`); it explains slower
@@ -204,6 +209,7 @@ impl Summary {
             time_ms: None,
             timings_ms: None,
             peak_memory_bytes: None,
+            memory_estimate_bytes: None,
             cold_memory: None,
             warnings: Vec::new(),
         }
@@ -312,6 +318,9 @@ impl Summary {
             );
             if let Some(peak) = self.peak_memory_bytes {
                 let _ = write!(o, "; peak memory {}", human_bytes(peak));
+            }
+            if let Some(estimate) = self.memory_estimate_bytes {
+                let _ = write!(o, " (estimate {})", human_bytes(estimate));
             }
             if self.cold_memory == Some(true) {
                 o.push_str("; cold memory (fresh huge pages were slow, small pages used)");

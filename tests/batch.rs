@@ -91,7 +91,7 @@ fn a_batch_starts_its_largest_inputs_first_and_answers_in_input_order() {
         &inputs,
         &outputs,
         &svpack::build::BuildConfig::default(),
-        1,
+        &svpack::build::BatchConfig::jobs(1),
         &|n, stage| {
             if stage == "load" {
                 started.lock().unwrap().push(n);

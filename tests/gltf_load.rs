@@ -385,12 +385,16 @@ fn shared_world_bounds_match_reference() {
     }
 }
 
-/// A GLB's work estimate (what a batch orders its inputs by) is its JSON
-/// chunk and the bytes its accessors cover, not its BIN chunk's image; a
-/// `.gltf`'s counts the geometry in its `.bin`. Caught: the GLB's JSON
-/// read from byte 12 (the estimate fell back to the file's size).
+/// A GLB's soup estimate (what a batch orders its inputs by and budgets
+/// their memory with) is its JSON chunk and its mesh instances' positions
+/// and triangles, not its BIN chunk's image; for the shared glTF models,
+/// the JSON and exactly the bytes of positions and triangles their load
+/// makes, with 2CylinderEngine's 67 instances of 29 meshes, FlightHelmet's
+/// geometry in its `.bin` and mode5's strips and fans. Caught: the GLB's
+/// JSON read from byte 12 (the estimate fell back to the file's size);
+/// each mesh counted once, not per instance (2CylinderEngine short).
 #[test]
-fn a_glb_estimate_counts_its_json_and_accessors_not_its_images() {
+fn a_glb_estimate_counts_its_json_and_instances_not_its_images() {
     let dir = tempdir();
     let doc = json!({
         "asset": {"version": "2.0"},
@@ -398,26 +402,39 @@ fn a_glb_estimate_counts_its_json_and_accessors_not_its_images() {
             {"bufferView": 0, "componentType": 5126, "count": 300, "type": "VEC3"},
             {"bufferView": 1, "componentType": 5125, "count": 900, "type": "SCALAR"}
         ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
         "buffers": [{"byteLength": 1 << 20}]
     });
     let path = dir.path().join("image_heavy.glb");
     std::fs::write(&path, glb_bytes(&doc, &vec![7u8; 1 << 20])).unwrap();
     let json_chunk = serde_json::to_vec(&doc).unwrap().len().next_multiple_of(4);
-    assert_eq!(
-        svpack::load::work_estimate(&path),
-        (json_chunk + 300 * 12 + 900 * 4) as u64
-    );
+    let soup = (json_chunk + 300 * 12 + 300 * 12) as u64;
+    assert_eq!(svpack::load::soup_estimate(&path), soup);
+    assert_eq!(svpack::load::work_estimate(&path), soup);
     let Some(shared) = shared_meshes() else {
         return;
     };
-    let helmet = shared.join("gltf/FlightHelmet");
-    let size = |f: &str| std::fs::metadata(helmet.join(f)).unwrap().len();
-    let estimate = svpack::load::work_estimate(&helmet.join("FlightHelmet.gltf"));
-    let (json, bin) = (size("FlightHelmet.gltf"), size("FlightHelmet.bin"));
-    assert!(
-        json + bin / 2 < estimate && estimate <= json + bin,
-        "{estimate} against {json} + {bin}"
-    );
+    for name in [
+        "gltf/2CylinderEngine.glb",
+        "gltf/FlightHelmet/FlightHelmet.gltf",
+        "gltf/mode5.gltf",
+        "gltf/CesiumMilkTruck.glb",
+    ] {
+        let path = shared.join(name);
+        let mut file = std::fs::File::open(&path).unwrap();
+        let json = if name.ends_with(".glb") {
+            let mut head = [0u8; 16];
+            std::io::Read::read_exact(&mut file, &mut head).unwrap();
+            u32::from_le_bytes(head[12..16].try_into().unwrap()) as u64
+        } else {
+            file.metadata().unwrap().len()
+        };
+        let soup = svpack::load::load(&path).unwrap();
+        let made = 12 * soup.positions.len() as u64 + 4 * soup.indices.len() as u64;
+        assert_eq!(svpack::load::soup_estimate(&path), json + made, "{name}");
+    }
 }
 
 #[test]

@@ -386,34 +386,79 @@ pub fn read_file(path: &Path) -> Result<FileBytes> {
     crate::file_bytes::read_or_map(path).map_err(|e| Error::io(path, e))
 }
 
-/// An estimate of the work of building the input at `path`, in weighted
-/// bytes, by which a batch starts its largest inputs first
-/// (`build::build_batch`). Reads at most the file's first bytes and a glTF's
-/// JSON, never its buffers.
-///
-/// - An OBJ counts its text twice: its build took about 9 ns a byte here
-///   (the dragon's 33 MB in 315 ms, the 5M scene's 204 MB in 1.8 s, one
-///   thread), about twice a glTF's per byte of geometry (the dragon's GLB,
-///   15.7 MB, in 68 ms).
-/// - A glTF counts its JSON and the bytes its accessors cover
-///   ([`gltf::accessor_bytes`]), wherever their buffers are: a `.gltf`'s own
-///   size leaves out its `.bin` files, and a `.glb`'s counts its images.
-/// - Anything else, and a glTF whose JSON cannot be read, counts its size;
-///   an unreadable file counts 0 (its build reports the problem).
-pub fn work_estimate(path: &Path) -> u64 {
+/// What the head of the file at `path` says of its build: its format (None
+/// when it is neither, or unreadable), its size, and the bytes of the soup
+/// its load will make, estimated (see [`soup_estimate`]).
+struct SizeHint {
+    format: Option<Format>,
+    size: u64,
+    soup: u64,
+}
+
+fn size_hint(path: &Path) -> SizeHint {
     use std::io::Read;
+    let unknown = |size| SizeHint {
+        format: None,
+        size,
+        soup: size,
+    };
     let Ok(mut file) = std::fs::File::open(path) else {
-        return 0;
+        return unknown(0);
     };
     let size = file.metadata().map_or(0, |m| m.len());
     let mut head = Vec::with_capacity(20);
     if (&mut file).take(20).read_to_end(&mut head).is_err() {
-        return size;
+        return unknown(size);
     }
     match detect_format(path, &head) {
-        Ok(Format::Obj) => size.saturating_mul(2),
-        Ok(Format::Gltf) => gltf::accessor_bytes(&mut file, &head, size).unwrap_or(size),
-        Err(_) => size,
+        Ok(Format::Obj) => SizeHint {
+            format: Some(Format::Obj),
+            size,
+            soup: size / 2,
+        },
+        Ok(Format::Gltf) => match gltf::soup_bytes(&mut file, &head, size) {
+            Some(soup) => SizeHint {
+                format: Some(Format::Gltf),
+                size,
+                soup,
+            },
+            None => unknown(size),
+        },
+        Err(_) => unknown(size),
+    }
+}
+
+/// An estimate of the bytes of positions and triangles (12 bytes each) the
+/// load of the input at `path` will make, read from its head, never its
+/// buffers: the measure by which a batch orders its inputs
+/// ([`work_estimate`]) and budgets their memory
+/// (`build::memory_estimate`).
+///
+/// - An OBJ counts half its text: the dragon's 31.8 MiB of text hold 15.0
+///   MiB of positions and triangles, the 5M scene's 195 MiB 86.6 MiB.
+/// - A glTF counts its JSON and, for every mesh instance its load places,
+///   each triangle primitive's positions and triangles
+///   ([`gltf::soup_bytes`]), wherever their buffers are: a `.gltf`'s own
+///   size leaves out its `.bin` files, a `.glb`'s counts its images, and a
+///   mesh placed by three nodes is loaded three times.
+/// - Anything else, and a glTF whose JSON cannot be read, counts its size;
+///   an unreadable file counts 0 (its build reports the problem).
+pub fn soup_estimate(path: &Path) -> u64 {
+    size_hint(path).soup
+}
+
+/// An estimate of the work of building the input at `path`, in weighted
+/// bytes, by which a batch starts its largest inputs first
+/// (`build::build_batch`): [`soup_estimate`], with an OBJ's counted four
+/// times (twice its text). Why: an OBJ's build took about 9 ns a byte of
+/// text here (the dragon's 33 MB in 315 ms, the 5M scene's 204 MB in 1.8 s,
+/// one thread), about twice a glTF's per byte of geometry (the dragon's
+/// GLB, 15.7 MB, in 68 ms).
+pub fn work_estimate(path: &Path) -> u64 {
+    let hint = size_hint(path);
+    match hint.format {
+        Some(Format::Obj) => hint.size.saturating_mul(2),
+        _ => hint.soup,
     }
 }
 
@@ -430,13 +475,16 @@ pub fn load(path: &Path) -> Result<Soup> {
 mod tests {
     use super::*;
 
-    /// The estimates a batch orders its inputs by: an OBJ's text twice; a
-    /// glTF's JSON and its accessors' bytes, from a `.gltf` whose buffer is
-    /// another file (not there: only the JSON is read); otherwise the size,
-    /// or 0 for a missing file (a GLB's: `tests/gltf_load.rs`). Caught: the
-    /// OBJ's weight left out; `MAT4` taken as 4 components.
+    /// The estimates a batch orders its inputs by and budgets memory with:
+    /// an OBJ's soup half its text, its work twice its text; a glTF's JSON
+    /// and, per mesh instance, its triangle primitives' positions and
+    /// triangles, from a `.gltf` whose buffer is another file (not there:
+    /// only the JSON is read); otherwise the size, or 0 for a missing file
+    /// (a GLB's: `tests/gltf_load.rs`). Caught: the OBJ's weight left out
+    /// of the work; each mesh counted once, not per instance; points
+    /// counted as triangles; a strip's triangles counted as a list's.
     #[test]
-    fn work_estimates_weigh_obj_text_and_gltf_accessors() {
+    fn soup_estimates_count_obj_text_and_gltf_instances() {
         let dir = tempfile::tempdir().unwrap();
         let at = |name: &str, bytes: &[u8]| {
             let p = dir.path().join(name);
@@ -444,24 +492,39 @@ mod tests {
             p
         };
         let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
-        assert_eq!(work_estimate(&at("t.obj", obj)), 2 * obj.len() as u64);
+        let path = at("t.obj", obj);
+        assert_eq!(soup_estimate(&path), obj.len() as u64 / 2);
+        assert_eq!(work_estimate(&path), 2 * obj.len() as u64);
+        // Mesh 0 is placed by node 0 and by node 2 (a child of node 1);
+        // mesh 1 by no node. Its points and its normals are never read.
         let json = br#"{"asset": {"version": "2.0"},
   "accessors": [
     {"bufferView": 0, "componentType": 5126, "count": 1000, "type": "VEC3"},
     {"bufferView": 1, "componentType": 5123, "count": 3000, "type": "SCALAR"},
-    {"componentType": 5121, "count": 10, "type": "MAT4"}],
+    {"bufferView": 2, "componentType": 5126, "count": 10, "type": "VEC3"},
+    {"bufferView": 3, "componentType": 5126, "count": 1000, "type": "VEC3"}],
+  "meshes": [
+    {"primitives": [
+      {"attributes": {"POSITION": 0, "NORMAL": 3}, "indices": 1},
+      {"attributes": {"POSITION": 0}, "mode": 0},
+      {"attributes": {"POSITION": 2}, "mode": 5}]},
+    {"primitives": [{"attributes": {"POSITION": 3}}]}],
+  "nodes": [{"mesh": 0}, {"children": [2]}, {"mesh": 0, "translation": [1, 0, 0]}],
+  "scenes": [{"nodes": [0, 1]}],
+  "scene": 0,
   "buffers": [{"uri": "elsewhere.bin", "byteLength": 9999999}]}"#;
-        let accessors = 1000 * 12 + 3000 * 2 + 10 * 16;
-        assert_eq!(
-            work_estimate(&at("m.gltf", json)),
-            json.len() as u64 + accessors
-        );
+        let instance = (1000 + 1000) * 12 + (10 + 8) * 12;
+        let path = at("m.gltf", json);
+        assert_eq!(soup_estimate(&path), json.len() as u64 + 2 * instance);
+        assert_eq!(work_estimate(&path), soup_estimate(&path));
         // Not JSON, or not glTF JSON: the file's size.
         let text = b"{\"accessors\": [{\"count\": \"many\"}]}";
         assert_eq!(work_estimate(&at("broken.gltf", text)), text.len() as u64);
         let other = at("notes.txt", b"twelve bytes");
         assert_eq!(work_estimate(&other), 12);
+        assert_eq!(soup_estimate(&other), 12);
         assert_eq!(work_estimate(&dir.path().join("missing.obj")), 0);
+        assert_eq!(soup_estimate(&dir.path().join("missing.obj")), 0);
     }
 
     /// Slices hashed by two threads at once (each step takes the next
