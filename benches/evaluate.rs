@@ -74,7 +74,7 @@ fn shared_bucket(
 /// The kernel choices the evaluator's dispatching benches run with: label
 /// suffix, AVX-512 off (`evaluate_simd::disable_avx512`), and the caps'
 /// gathers forced (`evaluate_simd::prefer_gather_caps`; None leaves them
-/// to the CPU's vendor).
+/// to the measurement of `evaluate_indexed::gathers_pay`).
 const KERNEL_CHOICES: [(&str, bool, Option<bool>); 3] = [
     ("", false, None),
     ("_no_avx512", true, None),
@@ -140,7 +140,7 @@ fn bench_file(c: &mut Criterion, name: &str, input: &Path) {
     // `_no_avx512`: the same with the AVX-512 kernels turned off (AVX2 for
     // the caps, the plain loop for the sides): the previous kernels as
     // peers in the same run. `_gathers`: the AVX-512 caps kernel, whose
-    // gathers the CPU's vendor decides on (`evaluate_simd::gather_caps`),
+    // gathers a measurement decides on (`evaluate_simd::gather_caps`),
     // forced on where the CPU has AVX-512, so that the choice is measured
     // on each machine.
     if let Some(ix) = d.ordered.as_ref().map(|o| o.caps()) {

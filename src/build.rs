@@ -747,11 +747,11 @@ const PEAK_HALVES_PER_SOUP_BYTE: u64 = 9;
 
 /// Memory a build adds at its peak whatever its size: the pool's buffers,
 /// huge-page rounding of its few large blocks (2 MiB each at most), and
-/// small inputs' tables. The shared models under 5 MiB of soup added
-/// 0.1–12 MiB with two threads.
+/// small inputs' tables. The shared models under 5 MiB of soup added 0–14
+/// MiB with two threads.
 const PEAK_FIXED: u64 = 16 << 20;
 
-/// Memory a build adds per thread of its pool: each thread's fill buffers.
+/// Memory a build adds per thread of its pool (each thread's own buffers).
 /// 2CylinderEngine's peak rose from 13.0 to 25.7 MiB from 1 to 8 threads
 /// (`--threads 8` on 2 cores), the 5M scene's from 325 to 387 MiB.
 const PEAK_PER_THREAD: u64 = 2 << 20;
@@ -772,8 +772,9 @@ const FRAME_FIXED: u64 = 48 << 20;
 /// head alone ([`load::soup_estimate`]): 4.5 bytes per byte of soup, 16 MiB,
 /// and 2 MiB per thread, plus 8 bytes per byte of soup and 48 MiB when the
 /// output is compressed. It is meant to be above the build's peak: it was
-/// 1.0–1.6 times the peak added on the dragon and the 5M scene, more on
-/// small inputs (their fixed part). What a batch under a memory budget
+/// 1.2–2.2 times the peak added on the dragon and the 5M scene with one
+/// and two threads, plain and compressed, more on small inputs (their
+/// fixed part). What a batch under a memory budget
 /// counts each input as ([`BatchConfig::max_memory`]).
 pub fn memory_estimate(input: &Path, cfg: &BuildConfig, threads: usize) -> u64 {
     let soup = load::soup_estimate(input);

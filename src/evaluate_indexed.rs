@@ -283,9 +283,8 @@ impl IndexedCaps {
     }
 
     /// One chunk of a group of `N` lights into `sink`, through the widest
-    /// copy of the block loop the CPU runs ([`Kernel::detect`]; the AVX-512
-    /// kernel's gathers, which pay on Intel for one light, are shared by
-    /// the lights here).
+    /// copy of the block loop the CPU runs ([`Kernel::detect`]; the lights
+    /// share each block's corner loads and transposes).
     fn signs_many<const N: usize, S: Sink<N>>(
         &self,
         sorted: &[[u32; 3]],
@@ -317,7 +316,9 @@ impl IndexedCaps {
     /// `on_corner`), else through [`IndexedCaps::signs_many`]'s copies.
     fn signs(&self, sorted: &[[u32; 3]], odd: &[bool], l: Light, on_corner: bool, out: &mut [i8]) {
         #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::gather_caps() && self.rows() <= MAX_GATHER_POINTS {
+        if self.rows() <= MAX_GATHER_POINTS
+            && crate::evaluate_simd::gather_caps(self.len() >= GATHER_MIN_TRIANGLES)
+        {
             // SAFETY: the CPU has AVX-512F (`gather_caps` checks it); every
             // corner names a row of points (`new` stores them so), whose
             // float offsets fit an i32 (checked just above).
@@ -745,6 +746,94 @@ unsafe fn signs_many_impl<
     }
 }
 
+/// Whether the AVX-512 kernel's gathers beat the copies without gathers on
+/// this CPU ([`measure_gathers`], once per process). Only asked where the
+/// CPU has AVX-512 (`evaluate_simd::gather_caps`).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn gathers_pay() -> bool {
+    static PAY: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *PAY.get_or_init(measure_gathers)
+}
+
+/// Times the caps of one light over a table of 16,384 points (256 KiB)
+/// and 4,096 triangles of pseudo-random corners
+/// ([`gather_probe_table`]), through the AVX-512 kernel and through the
+/// copy [`IndexedCaps::signs_many`] takes, five times each, alternated, on
+/// the calling thread; true when the gathers' fastest run is at least 10%
+/// shorter. Once per process, and only for a table of at least
+/// [`GATHER_MIN_TRIANGLES`]. Why measure, not ask the
+/// vendor: the gathers were much faster on a Sapphire Rapids Xeon and
+/// slower on a Zen 4 EPYC, and so the rule was Intel's; on an Intel Xeon
+/// at 2.8 GHz with AVX-512 (fifty-first round) they took the dragon's caps
+/// 4.85–4.89 ms against 1.41 without (`cargo run --release --example
+/// stage_probe -- evaluate target/dragon/dragon.glb`). Either kernel gives
+/// the same bits.
+#[cfg(target_arch = "x86_64")]
+fn measure_gathers() -> bool {
+    use std::time::{Duration, Instant};
+    if !crate::evaluate_simd::have_avx512() {
+        return false;
+    }
+    let Some(table) = gather_probe_table() else {
+        return false;
+    };
+    let light = GATHER_PROBE_LIGHT;
+    let mut out = vec![0i8; table.len()];
+    let (mut gathers, mut rows) = (Duration::MAX, Duration::MAX);
+    for _ in 0..5 {
+        let t = Instant::now();
+        // SAFETY: the CPU has AVX-512F (checked above); `new` stored every
+        // corner as a row of its 16,384 points, far below
+        // MAX_GATHER_POINTS.
+        unsafe { signs_avx512::<false>(&table.points, &table.sorted, &table.odd, light, &mut out) };
+        gathers = gathers.min(t.elapsed());
+        let t = Instant::now();
+        table.signs_many(
+            &table.sorted,
+            &table.odd,
+            [light],
+            false,
+            &mut Bytes([&mut out]),
+        );
+        rows = rows.min(t.elapsed());
+    }
+    gathers * 10 < rows * 9
+}
+
+/// The table [`measure_gathers`] times: 16,384 points, strictly
+/// increasing in the lexicographic order (x is the index), and 4,096
+/// triangles of corners from a xorshift generator. None only if `new`
+/// declined it (a test checks it does not).
+#[cfg(any(target_arch = "x86_64", test))]
+fn gather_probe_table() -> Option<IndexedCaps> {
+    const POINTS: u32 = 1 << 14;
+    const TRIANGLES: usize = 1 << 12;
+    let positions: Vec<[f32; 3]> = (0..POINTS)
+        .map(|i| [i as f32, (i % 97) as f32 * 0.25, (i % 89) as f32 * -0.5])
+        .collect();
+    let mut state = 0x9e37_79b9_u32;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state % POINTS
+    };
+    let caps: Vec<[u32; 3]> = (0..TRIANGLES).map(|_| [next(), next(), next()]).collect();
+    IndexedCaps::new(&positions, &caps)
+}
+
+/// The light of [`measure_gathers`]: a point off every corner of its table.
+#[cfg(any(target_arch = "x86_64", test))]
+const GATHER_PROBE_LIGHT: Light = [3.0e4 + 0.5, -2.5, 4.0, 1.0];
+
+/// Fewest triangles for which the caps ask whether the gathers pay
+/// ([`measure_gathers`], 0.41–0.43 ms here, once per process); smaller tables
+/// take the copies without gathers (unless a benchmark's setting says
+/// otherwise), the faster on two of the three CPUs measured, and on the
+/// third (2.8–3.6 against 1.8 ns per side record for the gathers, sixth
+/// round) slower by at most about 0.2 ms per light at this size.
+const GATHER_MIN_TRIANGLES: usize = 1 << 16;
+
 /// Most points whose float offsets (`3 · id + 2`) fit the AVX-512 gathers'
 /// signed 32-bit indices.
 const MAX_GATHER_POINTS: usize = (i32::MAX as usize - 2) / 3;
@@ -842,6 +931,48 @@ mod tests {
     //! not hold for must be declined.
     use super::*;
     use crate::multiplicity::{PERMS, test_bits};
+
+    /// The table the gathers are timed on is one `new` accepts (declined,
+    /// the measurement would always answer no), its light is on none of
+    /// its corners (the kernels timed skip that test), and every kernel
+    /// gives it the same signs, most of them nonzero. Caught: the probe's
+    /// points not strictly increasing (x as the index modulo 1,000); its
+    /// light on a corner (point 1's position).
+    #[test]
+    fn the_gather_probe_table_is_accepted_and_every_kernel_agrees() {
+        let table = gather_probe_table().expect("`new` accepts the probe's table");
+        assert_eq!(table.len(), 1 << 12);
+        assert!(!table.light_on_a_corner(GATHER_PROBE_LIGHT));
+        let signs = |on_corner: bool| {
+            let mut out = vec![0i8; table.len()];
+            table.signs_many(
+                &table.sorted,
+                &table.odd,
+                [GATHER_PROBE_LIGHT],
+                on_corner,
+                &mut Bytes([&mut out]),
+            );
+            out
+        };
+        let off = signs(false);
+        assert!(off == signs(true));
+        assert!(off.iter().filter(|&&s| s != 0).count() > table.len() / 2);
+        #[cfg(target_arch = "x86_64")]
+        if crate::evaluate_simd::have_avx512() {
+            let mut gathered = vec![0i8; table.len()];
+            // SAFETY: AVX-512F checked; `new` built the table's rows.
+            unsafe {
+                signs_avx512::<false>(
+                    &table.points,
+                    &table.sorted,
+                    &table.odd,
+                    GATHER_PROBE_LIGHT,
+                    &mut gathered,
+                )
+            };
+            assert!(off == gathered);
+        }
+    }
 
     /// A sorted, deduplicated table with many equal x and y coordinates.
     fn table(n: usize, seed: u64) -> Vec<[f32; 3]> {

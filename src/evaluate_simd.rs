@@ -294,11 +294,12 @@ pub fn disable_avx512(off: bool) {
     AVX512_OFF.store(off, std::sync::atomic::Ordering::Relaxed);
 }
 
-/// What [`prefer_gather_caps`] set: 0 the CPU's vendor decides, 1 yes, 2 no.
+/// What [`prefer_gather_caps`] set: 0 the measurement decides, 1 yes, 2 no.
 static GATHER_CAPS: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
 
 /// With `Some(yes)`, makes [`gather_caps`] answer `yes` (where the CPU has
-/// AVX-512) whatever its vendor; with None, leaves it to the vendor again. For benchmarks, which time the caps kernel
+/// AVX-512) for any table, whatever the measurement; with None, leaves it
+/// to the measurement again. For benchmarks, which time the caps kernel
 /// with gathers against the one without in one run; results are bit for
 /// bit the same either way.
 #[doc(hidden)]
@@ -313,59 +314,50 @@ pub fn prefer_gather_caps(choice: Option<bool>) {
 
 /// Whether the caps from corner ids (`evaluate_indexed`) should take the
 /// AVX-512 kernel, which fetches the corners with gathers, rather than the
-/// AVX2 one, which loads each corner's row and transposes: on Intel CPUs
-/// (not on others) unless [`prefer_gather_caps`] says otherwise, and only
-/// where [`have_avx512`]. Why by vendor: the gathers are fast on Intel and
-/// slow on AMD's Zen 4, and the two CPUs this project's machine has run on
-/// give opposite answers. On a Sapphire Rapids Xeon (sixth round) the
-/// kernel took the shared evaluation of the dragon from 2.8–3.6 to 1.8 ns
-/// per side record; on an EPYC of family 25, model 17 (Zen 4, twenty-fifth
-/// round) the dragon's caps took 3.02 ms with it and 1.84 ms without, the
-/// shared evaluation 5.25 and 3.66 ms (fastest of 40 alternated rounds,
-/// `cargo run --release --example stage_probe -- evaluate
-/// target/dragon/dragon.glb`), while the sides' gathers
-/// (`try_sides_from_caps`) still gained there: 2.48 → 1.75 ms
-/// (`RAYON_NUM_THREADS=1 SVPACK_BENCH_ONLY=dragon_full cargo bench --bench
-/// evaluate -- 'dragon_full/sides_given_caps'`).
-pub(crate) fn gather_caps() -> bool {
+/// copies that load each corner's row and transpose: where the CPU has
+/// AVX-512 ([`have_avx512`]), for a table that is `large` enough to pay
+/// for asking, when the gathers measured faster on this CPU
+/// (`evaluate_indexed::gathers_pay`, once per process), unless
+/// [`prefer_gather_caps`] says otherwise (for any table). Why measured: the three CPUs
+/// this project's machine has run on disagree, and two of them are
+/// Intel's. On a Sapphire Rapids Xeon (sixth round) the kernel took the
+/// shared evaluation of the dragon from 2.8–3.6 to 1.8 ns per side
+/// record; on an EPYC of family 25, model 17 (Zen 4, twenty-fifth round)
+/// the dragon's caps took 3.02 ms with it and 1.84 ms without, the shared
+/// evaluation 5.25 and 3.66 ms (fastest of 40 alternated rounds, `cargo
+/// run --release --example stage_probe -- evaluate
+/// target/dragon/dragon.glb`); so until the fifty-first round the rule was
+/// the vendor's, Intel yes. On an Intel Xeon at 2.8 GHz with AVX-512
+/// (fifty-first round) the dragon's caps took 4.85–4.89 ms with the
+/// gathers and 1.41 without. The sides' gathers (`try_sides_from_caps`)
+/// still gained on the EPYC: 2.48 → 1.75 ms (`RAYON_NUM_THREADS=1
+/// SVPACK_BENCH_ONLY=dragon_full cargo bench --bench evaluate --
+/// 'dragon_full/sides_given_caps'`).
+pub(crate) fn gather_caps(large: bool) -> bool {
     let setting = GATHER_CAPS.load(std::sync::atomic::Ordering::Relaxed);
-    gather_caps_for(setting, cpu_is_intel) && have_avx512()
+    // AVX-512 first: the measurement runs the AVX-512 kernel.
+    have_avx512() && gather_caps_for(setting, large, measured_gathers_pay)
 }
 
-/// [`gather_caps`] before the check for AVX-512: the setting (as in
-/// `GATHER_CAPS`), else the vendor (`intel` asked only then).
-fn gather_caps_for(setting: u8, intel: impl FnOnce() -> bool) -> bool {
-    match setting {
-        0 => intel(),
-        v => v == 1,
-    }
-}
-
-/// Whether the CPU's vendor string is Intel's, read once: CPUID traps to
-/// the hypervisor in a virtual machine, and asked per chunk of caps it
-/// took the dragon's caps from 1.7 to 2.6 ms here (a local probe).
-fn cpu_is_intel() -> bool {
-    static INTEL: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *INTEL.get_or_init(read_cpu_is_intel)
-}
-
-/// [`cpu_is_intel`], asked of the CPU.
-fn read_cpu_is_intel() -> bool {
+/// `evaluate_indexed::gathers_pay` where there is one.
+fn measured_gathers_pay() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        // Leaf 0 gives the vendor string in ebx, edx, ecx.
-        #[allow(unused_unsafe)] // (`__cpuid` is safe in newer Rust.)
-        // SAFETY: every x86-64 CPU has the CPUID instruction and leaf 0.
-        let r = unsafe { std::arch::x86_64::__cpuid(0) };
-        let mut vendor = [0u8; 12];
-        for (i, w) in [r.ebx, r.edx, r.ecx].into_iter().enumerate() {
-            vendor[4 * i..4 * i + 4].copy_from_slice(&w.to_le_bytes());
-        }
-        &vendor == b"GenuineIntel"
+        crate::evaluate_indexed::gathers_pay()
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+/// [`gather_caps`] after the check for AVX-512: the setting (as in
+/// `GATHER_CAPS`), else for a `large` table the measurement (`measured`
+/// asked only then), else no.
+fn gather_caps_for(setting: u8, large: bool, measured: impl FnOnce() -> bool) -> bool {
+    match setting {
+        0 => large && measured(),
+        v => v == 1,
     }
 }
 
@@ -830,18 +822,21 @@ mod tests {
         }
     }
 
-    /// The caps' choice of kernel follows the benchmarks' setting, and
-    /// with none the CPU's vendor (the setting itself is not changed here:
-    /// other tests set it while they run). Caught: the setting ignored
-    /// (the vendor alone decides).
+    /// The caps' choice of kernel follows the benchmarks' setting for any
+    /// table, and with none the measurement, asked only for a large table
+    /// (the setting itself is not changed here: other tests set it while
+    /// they run). Caught: the setting ignored (the measurement alone
+    /// decides); the measurement asked for a small table.
     #[test]
-    fn gather_caps_follow_the_setting_then_the_vendor() {
-        for intel in [false, true] {
-            assert_eq!(gather_caps_for(0, || intel), intel);
-            assert!(gather_caps_for(1, || intel));
-            assert!(!gather_caps_for(2, || intel));
+    fn gather_caps_follow_the_setting_then_the_measurement() {
+        for faster in [false, true] {
+            assert_eq!(gather_caps_for(0, true, || faster), faster);
+            assert!(!gather_caps_for(0, false, || panic!("measured")));
+            for large in [false, true] {
+                assert!(gather_caps_for(1, large, || panic!("measured")));
+                assert!(!gather_caps_for(2, large, || panic!("measured")));
+            }
         }
-        assert_eq!(cpu_is_intel(), read_cpu_is_intel());
     }
 
     #[test]
