@@ -765,7 +765,7 @@ pub(crate) fn gathers_pay() -> bool {
 /// vendor: the gathers were much faster on a Sapphire Rapids Xeon and
 /// slower on a Zen 4 EPYC, and so the rule was Intel's; on an Intel Xeon
 /// at 2.8 GHz with AVX-512 (fifty-first round) they took the dragon's caps
-/// 4.85–4.89 ms against 1.41 without (`cargo run --release --example
+/// 4.78–4.91 ms against 1.32–1.47 without (`cargo run --release --example
 /// stage_probe -- evaluate target/dragon/dragon.glb`). Either kernel gives
 /// the same bits.
 #[cfg(target_arch = "x86_64")]

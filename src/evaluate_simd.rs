@@ -328,8 +328,8 @@ pub fn prefer_gather_caps(choice: Option<bool>) {
 /// run --release --example stage_probe -- evaluate
 /// target/dragon/dragon.glb`); so until the fifty-first round the rule was
 /// the vendor's, Intel yes. On an Intel Xeon at 2.8 GHz with AVX-512
-/// (fifty-first round) the dragon's caps took 4.85–4.89 ms with the
-/// gathers and 1.41 without. The sides' gathers (`try_sides_from_caps`)
+/// (fifty-first round) the dragon's caps took 4.78–4.91 ms with the
+/// gathers and 1.32–1.47 without. The sides' gathers (`try_sides_from_caps`)
 /// still gained on the EPYC: 2.48 → 1.75 ms (`RAYON_NUM_THREADS=1
 /// SVPACK_BENCH_ONLY=dragon_full cargo bench --bench evaluate --
 /// 'dragon_full/sides_given_caps'`).

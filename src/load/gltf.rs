@@ -298,7 +298,7 @@ const ESTIMATE_JSON_MAX: u64 = 16 << 20;
 
 /// The length of a glTF's JSON plus the bytes of the soup its load will
 /// make, from `file` whose first bytes are `head` and whose length is
-/// `size`: for every mesh instance the loader places ([`collect_instances`]:
+/// `size`: for every mesh instance the loader places (`collect_instances`:
 /// the default scene, or every scene, or every mesh once), each triangle
 /// primitive's positions and triangles, 12 bytes each. Only the JSON is
 /// read, never a buffer. None when the JSON cannot be read or parsed, is
