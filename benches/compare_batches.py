@@ -32,17 +32,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rebuild import run, spread  # noqa: E402
-
-
-def option(args, name, default):
-    """Removes `name VALUE` from args and returns VALUE (or default)."""
-    if name not in args:
-        return default
-    i = args.index(name)
-    value = args[i + 1]
-    del args[i:i + 2]
-    return value
+from rebuild import option, run, spread  # noqa: E402
 
 
 def main():

@@ -24,18 +24,11 @@ import subprocess
 import sys
 import tempfile
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rebuild import option  # noqa: E402
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MIB = 1 << 20
-
-
-def option(args, name, default):
-    """Removes `name VALUE` from args and returns VALUE (or default)."""
-    if name not in args:
-        return default
-    i = args.index(name)
-    value = args[i + 1]
-    del args[i:i + 2]
-    return value
 
 
 def summary(binary, src, out, threads, extra):
@@ -74,12 +67,13 @@ def main():
                     break
                 estimate = runs[0]["memory_estimate_bytes"]
                 peak = max(r["peak_memory_bytes"] for r in runs)
-                added = max(peak - base, 1)
-                ratio = estimate / added
-                flag = "" if ratio >= 1 else " **below**"
-                ok = ok and ratio >= 1
+                added = max(peak - base, 0)
+                # A build that adds less than 1 MiB has no useful ratio.
+                ratio = f"{estimate / added:.2f}" if added >= MIB else "-"
+                flag = "" if estimate >= added else " **below**"
+                ok = ok and estimate >= added
                 print(f"| {os.path.basename(src)} | {t} | {estimate / MIB:.1f} | {peak / MIB:.1f} "
-                      f"| {added / MIB:.1f} | {ratio:.2f}{flag} |")
+                      f"| {added / MIB:.1f} | {ratio}{flag} |")
     sys.exit(0 if ok else 1)
 
 

@@ -37,6 +37,16 @@ import tempfile
 import time
 
 
+def option(args, name, default):
+    """Removes `name VALUE` from args and returns VALUE (or default)."""
+    if name not in args:
+        return default
+    i = args.index(name)
+    value = args[i + 1]
+    del args[i:i + 2]
+    return value
+
+
 def spread(times):
     """"FASTEST / MEDIAN" of a list of ms, rounded to whole ms."""
     return f"{min(times):.0f} / {statistics.median(times):.0f}"
@@ -58,11 +68,7 @@ def run(binary, inputs, out, jobs, args=()):
 
 def main():
     args = sys.argv[1:]
-    jobs = None
-    if "--jobs" in args:
-        i = args.index("--jobs")
-        jobs = args[i + 1]
-        del args[i:i + 2]
+    jobs = option(args, "--jobs", None)
     if len(args) < 3:
         sys.exit(__doc__)
     old, new, src = args[:3]

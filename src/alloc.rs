@@ -28,7 +28,8 @@
 //! [`reserve_page_cache`].
 //!
 //! **While a [`KeepFreed`] guard lives, freed large blocks are kept for
-//! reuse** ([`CACHE_SLOTS`] of them, at most [`CACHE_BYTES`] in all)
+//! reuse** ([`CACHE_SLOTS`] of them, at most [`CACHE_BYTES`] in all, or
+//! less under a batch's memory budget: [`KeepFreed::within`])
 //! instead of being unmapped at once; the last guard's drop unmaps what is
 //! left. A build holds one (`build::build_file_with`), and so does a
 //! batch (`build::build_batch_with`), so that one input's freed blocks

@@ -812,7 +812,16 @@ impl BatchConfig {
         }
     }
 
-    /// The part of a budget a batch lets its kept blocks hold.
+    /// What the budget leaves the builds' estimates: all of it but the
+    /// kept blocks' part (a quarter, at most `alloc::CACHE_BYTES`). None
+    /// without a budget. An input whose estimate is above it is built
+    /// alone.
+    pub fn builds_budget(&self) -> Option<u64> {
+        self.max_memory.map(|b| b - Self::kept_bytes(b))
+    }
+
+    /// The part of a budget a batch lets its kept blocks hold: a quarter,
+    /// at most `alloc::CACHE_BYTES`.
     fn kept_bytes(budget: u64) -> u64 {
         (budget / 4).min(crate::alloc::CACHE_BYTES as u64)
     }
@@ -889,7 +898,7 @@ pub fn build_batch_with(
     let run = || {
         let threads = rayon::current_num_threads();
         let jobs = threads.min(inputs.len());
-        let budget = batch.max_memory.map(|b| b - BatchConfig::kept_bytes(b));
+        let budget = batch.builds_budget();
         // With a loop per input and no budget every build starts at once,
         // and the estimates (a glTF's JSON read twice) would be spent for
         // nothing.

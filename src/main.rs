@@ -124,8 +124,8 @@ enum Command {
         /// Memory budget of a batch, as bytes or with a binary unit (K, M,
         /// G, T: 1024^n; `512M`, `8G`, `1.5GiB`). An input starts only
         /// while the estimated peaks of the builds running, its own and the
-        /// blocks kept for reuse fit; one larger than the budget is built
-        /// alone. The estimate is read from each file (`--timings` prints
+        /// blocks kept for reuse (a quarter, at most 256 MiB) fit; one whose
+        /// estimate is above what that leaves is built alone. The estimate is read from each file (`--timings` prints
         /// it); outputs are identical whatever the budget.
         #[arg(long, value_name = "SIZE", value_parser = parse_size)]
         max_memory: Option<u64>,
@@ -651,17 +651,18 @@ fn run(cli: Cli) -> Result<Outcome, svpack::error::Error> {
             };
             let estimate =
                 |input: &std::path::Path| svpack::build::memory_estimate(input, &cfg, threads);
-            if let Some(budget) = max_memory
+            if let (Some(budget), Some(left)) = (max_memory, batch_cfg.builds_budget())
                 && batch
                 && !cli.quiet
             {
                 for input in &inputs {
                     let e = estimate(input);
-                    if e > budget {
+                    if e > left {
                         eprintln!(
-                            "note: {}: its estimated peak, {}, is above --max-memory {}; it is built with no other build beside it",
+                            "note: {}: its estimated peak, {}, is above the {} that --max-memory {} leaves the builds (the rest holds freed blocks for reuse); it is built with no other build beside it",
                             input.display(),
                             svpack::report::human_bytes(e),
+                            svpack::report::human_bytes(left),
                             svpack::report::human_bytes(budget)
                         );
                     }
@@ -947,7 +948,7 @@ mod tests {
 
     /// Sizes in bytes and binary units, case ignored, a fraction allowed;
     /// anything else refused with a message naming the text. Caught: `K`
-    /// taken as 1000; a unit's "iB" not accepted.
+    /// taken as 1 (no shift); `KiB` not accepted.
     #[test]
     fn sizes_take_binary_units() {
         for (text, bytes) in [

@@ -192,7 +192,7 @@ fn max_memory_on_the_command_line() {
         let name = input.file_stem().unwrap().to_str().unwrap();
         assert!(
             stderr.contains(&format!("{}: its estimated peak", input.display()))
-                && stderr.contains("is above --max-memory 1.00 KiB"),
+                && stderr.contains("that --max-memory 1.00 KiB leaves the builds"),
             "{stderr}"
         );
         let a = std::fs::read(plain.join(format!("{name}.svpk"))).unwrap();

@@ -481,8 +481,8 @@ mod tests {
     /// triangles, from a `.gltf` whose buffer is another file (not there:
     /// only the JSON is read); otherwise the size, or 0 for a missing file
     /// (a GLB's: `tests/gltf_load.rs`). Caught: the OBJ's weight left out
-    /// of the work; each mesh counted once, not per instance; points
-    /// counted as triangles; a strip's triangles counted as a list's.
+    /// of the work; each mesh counted once, not per instance; every mode
+    /// taken as a list of triangles (the points counted, the strip short).
     #[test]
     fn soup_estimates_count_obj_text_and_gltf_instances() {
         let dir = tempfile::tempdir().unwrap();
