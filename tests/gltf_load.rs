@@ -390,7 +390,7 @@ fn shared_world_bounds_match_reference() {
 /// and triangles, not its BIN chunk's image; for the shared glTF models,
 /// the JSON and exactly the bytes of positions and triangles their load
 /// makes, with 2CylinderEngine's 67 instances of 29 meshes, FlightHelmet's
-/// geometry in its `.bin` and mode5's strips and fans. Caught: the GLB's
+/// geometry in its `.bin` and mode5's 412 triangle strips. Caught: the GLB's
 /// JSON read from byte 12 (the estimate fell back to the file's size);
 /// each mesh counted once, not per instance (2CylinderEngine short).
 #[test]
