@@ -1025,7 +1025,9 @@ impl BatchQueue {
                 st.reserved += self.cost[n];
                 st.running += 1;
             }
-            None => st.loops -= 1,
+            // (Saturating: a batch of no inputs starts with no loops but
+            // the caller's.)
+            None => st.loops = st.loops.saturating_sub(1),
         }
         found
     }
@@ -1107,9 +1109,11 @@ mod tests {
     /// when the smallest ends one loop is started again, and finds nothing
     /// beside the largest; when the largest ends its loop starts one more,
     /// and the two middle inputs run together. An input above the budget
-    /// runs when nothing else does. Caught: the budget ignored; a build's
+    /// runs when nothing else does; a batch of no inputs builds nothing.
+    /// Caught: the budget ignored; a build's
     /// cost not given back when it ends; no loop started again when a
-    /// build ends; an input above the budget never started.
+    /// build ends; an input above the budget never started; the loops
+    /// counted down past zero (no inputs; an overflow in a debug build).
     #[test]
     fn a_batch_queue_starts_what_fits_and_restarts_loops() {
         let q = BatchQueue::new(vec![0, 1, 2, 3], vec![50, 30, 20, 10], Some(60), 3);
@@ -1132,6 +1136,10 @@ mod tests {
         assert_eq!(q.take(), None, "1 does not fit beside it");
         assert_eq!(q.finish(0), 0);
         assert_eq!(q.take(), Some(1));
+        // No inputs: nothing to take.
+        let q = BatchQueue::new(Vec::new(), Vec::new(), None, 0);
+        assert_eq!(q.take(), None);
+        assert!(build_batch(&[], &[], &BuildConfig::default(), 2).is_empty());
         // No budget: the order, whatever the costs.
         let q = BatchQueue::new(vec![2, 0, 1], vec![0; 3], None, 2);
         assert_eq!([q.take(), q.take()], [Some(2), Some(0)]);
