@@ -731,7 +731,12 @@ pub fn batch_outputs(
 /// order given.
 pub fn batch_order(inputs: &[std::path::PathBuf]) -> Vec<usize> {
     let work: Vec<u64> = inputs.iter().map(|i| load::work_estimate(i)).collect();
-    let mut order: Vec<usize> = (0..inputs.len()).collect();
+    order_by(&work)
+}
+
+/// Indices of `work`, largest first, equal ones in the order given.
+fn order_by(work: &[u64]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..work.len()).collect();
     order.sort_by_key(|&n| std::cmp::Reverse(work[n]));
     order
 }
@@ -777,7 +782,11 @@ const FRAME_FIXED: u64 = 48 << 20;
 /// fixed part). What a batch under a memory budget
 /// counts each input as ([`BatchConfig::max_memory`]).
 pub fn memory_estimate(input: &Path, cfg: &BuildConfig, threads: usize) -> u64 {
-    let soup = load::soup_estimate(input);
+    memory_for_soup(load::soup_estimate(input), cfg, threads)
+}
+
+/// [`memory_estimate`] of an input whose soup estimate is `soup`.
+fn memory_for_soup(soup: u64, cfg: &BuildConfig, threads: usize) -> u64 {
     let mut bytes = (soup.saturating_mul(PEAK_HALVES_PER_SOUP_BYTE) / 2)
         .saturating_add(PEAK_FIXED)
         .saturating_add(PEAK_PER_THREAD.saturating_mul(threads.max(1) as u64));
@@ -903,15 +912,18 @@ pub fn build_batch_with(
         // and the estimates (a glTF's JSON read twice) would be spent for
         // nothing.
         let (order, cost) = if jobs < inputs.len() || budget.is_some() {
-            let order = batch_order(inputs);
+            // The order by [`batch_order`]'s measure, and the costs, from
+            // one read of each input's head.
+            let (work, soup): (Vec<u64>, Vec<u64>) =
+                inputs.iter().map(|i| load::estimates(i)).unzip();
             let cost = match budget {
-                Some(_) => inputs
+                Some(_) => soup
                     .iter()
-                    .map(|i| memory_estimate(i, cfg, threads))
+                    .map(|&s| memory_for_soup(s, cfg, threads))
                     .collect(),
                 None => vec![0; inputs.len()],
             };
-            (order, cost)
+            (order_by(&work), cost)
         } else {
             ((0..inputs.len()).collect(), vec![0; inputs.len()])
         };

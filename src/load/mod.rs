@@ -395,6 +395,16 @@ struct SizeHint {
     soup: u64,
 }
 
+impl SizeHint {
+    /// [`work_estimate`]'s measure: an OBJ's text twice, else the soup.
+    fn work(&self) -> u64 {
+        match self.format {
+            Some(Format::Obj) => self.size.saturating_mul(2),
+            _ => self.soup,
+        }
+    }
+}
+
 fn size_hint(path: &Path) -> SizeHint {
     use std::io::Read;
     let unknown = |size| SizeHint {
@@ -455,11 +465,15 @@ pub fn soup_estimate(path: &Path) -> u64 {
 /// one thread), about twice a glTF's per byte of geometry (the dragon's
 /// GLB, 15.7 MB, in 68 ms).
 pub fn work_estimate(path: &Path) -> u64 {
+    size_hint(path).work()
+}
+
+/// [`work_estimate`] and [`soup_estimate`] of the input at `path` from one
+/// read of its head (a glTF's JSON parsed once): what a batch under a
+/// memory budget asks of each input.
+pub fn estimates(path: &Path) -> (u64, u64) {
     let hint = size_hint(path);
-    match hint.format {
-        Some(Format::Obj) => hint.size.saturating_mul(2),
-        _ => hint.soup,
-    }
+    (hint.work(), hint.soup)
 }
 
 /// Loads a glTF or OBJ file into a world-space soup.
