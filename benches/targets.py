@@ -20,7 +20,10 @@ What it runs (the README's "Performance" section explains each target):
   layout + write), fastest and median, in ms and ns per input triangle;
   the two-thread speed-up of the fastest and of the medians; peak memory
   against the input's positions and indices (12 bytes per declared vertex
-  and per triangle) plus the output file;
+  and per triangle) plus the output file. After each round's one-thread
+  build, as many bytes as its output are written into a new file the way
+  the build writes them, with nothing computed (`copy_alone`): the part
+  of "after parsing" that is this host's page cache, in the same rounds;
 - criterion, one thread (`RAYON_NUM_THREADS=1`), on the dragon:
   `weld+topology+layout/ours_buckets` against meshoptimizer's
   `weld+topology+layout/meshopt_adjacency` in the same group
@@ -36,9 +39,10 @@ What it runs (the README's "Performance" section explains each target):
   per-round overheads with 1 and with 2 threads.
 
 After the targets, a second table gives each input's stages (fastest /
-median, ms) with 1 and 2 threads, and (unless `--no-criterion`)
-`stage_probe -- floor`'s lines: the first target's runs with fresh and
-with recycled memory, and the fresh pages of their output alone. Time
+median, ms) with 1 and 2 threads and the output's copy alone, and
+(unless `--no-criterion`) `stage_probe -- floor`'s lines: the first
+target's runs with fresh and with recycled memory, and the fresh pages
+of their output alone. Time
 growing linearly with the triangle count is `bash benches/scaling.sh`'s
 table, not measured here.
 
@@ -53,6 +57,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DRAGON = os.path.join(ROOT, "target", "dragon", "dragon.glb")
@@ -89,18 +94,58 @@ def after_parsing(summary):
     return t["weld"] + t["topology"] + t["layout"] + t["write"]
 
 
+COPY_BLOCK = 2 << 20
+
+
+def copy_alone(path, size):
+    """The floor of a build's writes: `size` bytes put into a new file at
+    `path` as the build's writer puts its output (the previous file of that
+    name removed first, `sync`, the blocks reserved, then positioned writes
+    of 2 MiB from one buffer already in cache; `format::write_file_streamed`),
+    with nothing computed. Returns the time in ms from the reservation to
+    the last write. Why: every build copies its whole output into the page
+    cache (the caps in its topology stage, the sides in its write stage),
+    and how fast this host hands the page cache fresh memory changes from
+    minute to minute (`examples/first_touch.rs`); timed in the same rounds
+    as the builds, the copy alone tells how much of "after parsing" no code
+    of svpack's can take away. It meets cold memory as a build does, so
+    its fastest is the floor: a run of two rounds timed the dragon's copy
+    at 233 ms, where runs of ten took 22–24 ms at the fastest."""
+    if os.path.exists(path):
+        os.remove(path)
+    run(["sync"])
+    block = memoryview(bytes(range(256)) * (COPY_BLOCK // 256))
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        start = time.perf_counter()
+        os.posix_fallocate(fd, 0, size)
+        at = 0
+        while at < size:
+            n = min(COPY_BLOCK, size - at)
+            at += os.pwrite(fd, block[:n], at)
+        return (time.perf_counter() - start) * 1e3
+    finally:
+        os.close(fd)
+
+
 def measure_builds(binary, inp, rounds):
     """Alternated 1- and 2-thread builds of `inp`: per thread count, the
-    times after parsing and the peak memories, and the input's size terms."""
+    times after parsing and the peak memories, and the input's size terms;
+    after each round's one-thread build, its output's copy alone
+    (`copy_alone`)."""
     times = {1: [], 2: []}
     stages = {1: [], 2: []}
     peaks = {1: [], 2: []}
+    copies = []
     first = None
     with tempfile.TemporaryDirectory(dir=os.path.dirname(os.path.abspath(inp))) as work:
         out = os.path.join(work, "out.svpk")
+        copy = os.path.join(work, "copy.bin")
         for r in range(rounds):
             for t in ((1, 2) if r % 2 == 0 else (2, 1)):
                 s = build(binary, inp, out, t)
+                if t == 1:
+                    copies.append(copy_alone(copy, s["file_bytes"]))
                 times[t].append(after_parsing(s))
                 ms = s["timings_ms"]
                 stages[t].append((ms["weld"], ms["topology"], ms["layout"] + ms["write"]))
@@ -118,7 +163,7 @@ def measure_builds(binary, inp, rounds):
         "output": s["file_bytes"],
         "edge_instances": s["edge_instances"],
     }
-    return times, peaks, sizes, stages
+    return times, peaks, sizes, stages, copies
 
 
 def criterion_median(group_dir, bench_dir):
@@ -220,14 +265,17 @@ def main():
             f"memory kept between runs, as meshoptimizer's malloc keeps most of its own: "
             f"{kept / 1e6:.1f} ms, {kept / peer:.3f}",
             "yes" if ratio <= 0.1 else ("with memory kept" if kept / peer <= 0.1 else "no"))
-    for name, times, _, sizes, _ in results:
+    for name, times, _, sizes, _, copies in results:
         n = sizes["triangles"]
         fast, med = min(times[1]), statistics.median(times[1])
+        cfast, cmed = min(copies), statistics.median(copies)
         row(f"after parsing ≤ 80 ns per triangle, one thread ({name})",
             f"fastest {fast:.1f} ms = **{fast * 1e6 / n:.0f} ns**, median {med:.1f} ms = "
-            f"{med * 1e6 / n:.0f} ns",
+            f"{med * 1e6 / n:.0f} ns; its output's copy alone in the same rounds "
+            f"({sizes['output'] / 2**20:.1f} MiB, `copy_alone`): fastest {cfast:.1f} ms = "
+            f"{cfast * 1e6 / n:.0f} ns, median {cmed:.1f} ms = {cmed * 1e6 / n:.0f} ns",
             met_at(fast * 1e6 / n <= 80, med * 1e6 / n <= 80))
-    for name, times, _, _, _ in results:
+    for name, times, _, _, _, _ in results:
         fast = min(times[1]) / min(times[2])
         med = statistics.median(times[1]) / statistics.median(times[2])
         row(f"2 threads ≥ 1.6× one, byte-identical ({name})",
@@ -235,7 +283,7 @@ def main():
             f"{statistics.median(times[1]):.1f} → {statistics.median(times[2]):.1f} ms: {med:.2f}× "
             f"at the median; every output identical",
             met_at(fast >= 1.6, med >= 1.6))
-    for name, _, peaks, sizes, _ in results:
+    for name, _, peaks, sizes, _, _ in results:
         base = sizes["inputs"] + sizes["output"]
         row(f"peak memory ≤ 2.5 × (input positions and indices + output) ({name})",
             f"{max(peaks[1]) / 2**20:.1f} / {max(peaks[2]) / 2**20:.1f} MiB with 1 / 2 threads = "
@@ -256,12 +304,15 @@ def main():
                 f"median of rounds {one:+.1f}% with 1 thread, **{two:+.1f}%** with 2",
                 "yes" if two <= 10 else "no")
     print()
-    print("| input | threads | after parsing | weld | topology | layout + write |")
-    print("|---|---:|---:|---:|---:|---:|")
-    for name, times, _, _, stages in results:
+    print("| input | threads | after parsing | weld | topology | layout + write "
+          "| the output's copy alone |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for name, times, _, _, stages, copies in results:
         for t in (1, 2):
             cells = [f"{min(v):.1f} / {statistics.median(v):.1f}"
                      for v in [times[t]] + [[s[i] for s in stages[t]] for i in range(3)]]
+            # One copy per round, after the one-thread build.
+            cells.append(f"{min(copies):.1f} / {statistics.median(copies):.1f}" if t == 1 else "")
             print(f"| {name} | {t} | " + " | ".join(cells) + " |")
     if not no_criterion:
         # What fresh memory costs the first target at least: the same runs

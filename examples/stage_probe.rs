@@ -38,12 +38,19 @@
 //! without them (slower by about 2 ms: `file_write` took 21.2–21.4 ms
 //! for 128 MiB without, 18.9–19.5 ms with, twelfth round).
 //!
-//! Two environment variables, for every step: `RECYCLE=1` holds an
+//! Three environment variables, for every step: `RECYCLE=1` holds an
 //! `alloc::KeepFreed` guard, so that each run reuses the blocks the one
 //! before freed instead of faulting in fresh pages, whose cost on this
 //! machine varies more than the code's; `NO_AVX512=1` turns the crate's
 //! AVX-512 kernels off (`evaluate_simd::disable_avx512`), which times the
-//! scalar topology pass on the same binary.
+//! scalar topology pass on the same binary; `NO_THP=1` (Linux) turns
+//! transparent huge pages off for the process (`PR_SET_THP_DISABLE`), so
+//! that every block is in 4 KiB pages, which tells what the TLB's misses
+//! cost a step (fifty-second round, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo
+//! run --release --example stage_probe -- weld
+//! target/targets/scene_5000000.obj` with and without it, three
+//! alternations: the weld 66.7–68.2 ms in huge pages, 68.6–72.0 in small
+//! ones).
 
 use std::path::Path;
 use std::time::Instant;
@@ -80,6 +87,12 @@ fn main() {
     let _keep = std::env::var_os("RECYCLE").map(|_| svpack::alloc::KeepFreed::new());
     if std::env::var_os("NO_AVX512").is_some() {
         svpack::evaluate_simd::disable_avx512(true);
+    }
+    #[cfg(target_os = "linux")]
+    if std::env::var_os("NO_THP").is_some() {
+        // SAFETY: a plain prctl on this process; no memory is touched.
+        let r = unsafe { libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0) };
+        assert_eq!(r, 0, "prctl(PR_SET_THP_DISABLE) failed");
     }
     if std::env::var_os("RAYON_NUM_THREADS").is_none() {
         rayon::ThreadPoolBuilder::new()
