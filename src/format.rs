@@ -705,15 +705,19 @@ fn exchange(_: &Path, _: &Path) -> std::io::Result<()> {
 
 /// Writes the file to `path` atomically (temp file in the same directory,
 /// then renamed or swapped in, see `persist`), optionally zstd-wrapped.
-/// Returns the final header and the number of bytes on disk.
 pub fn write_file(
     path: &Path,
     header: Header,
     meshes: &[MeshPayload<'_>],
     compress: Option<i32>,
-) -> Result<(Header, u64)> {
+) -> Result<Written> {
     let tmp = temp_beside(path)?;
     let file = tmp.as_file().try_clone().map_err(|e| Error::io(path, e))?;
+    let clock = WriteClock::default();
+    let file = TimedFile {
+        file,
+        clock: &clock,
+    };
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
     let header = if let Some(level) = compress {
         let (_, probe) = finalize_header(header.clone(), meshes)?;
@@ -736,7 +740,13 @@ pub fn write_file(
         .map_err(|e| Error::io(path, e))?
         .len();
     persist(tmp, path)?;
-    Ok((header, size))
+    let (write_calls, write_bytes) = clock.spent();
+    Ok(Written {
+        header,
+        bytes: size,
+        write_calls,
+        write_bytes,
+    })
 }
 
 /// One mesh's payload produced piece by piece, for [`write_file_streamed`].
@@ -790,7 +800,12 @@ const UNWRITTEN: u32 = 0x7fa5_11ed;
 /// for it is a thread idle; here it hashes what is left of the input's
 /// digest instead (`load::DigestSlices`).
 #[derive(Default)]
-struct WriteTurns(std::sync::atomic::AtomicBool);
+struct WriteTurns {
+    /// Set while a thread writes.
+    busy: std::sync::atomic::AtomicBool,
+    /// The writes' time.
+    clock: WriteClock,
+}
 
 impl WriteTurns {
     /// Writes `bytes` at `offset` of `file` in turn, doing `side` work
@@ -805,7 +820,7 @@ impl WriteTurns {
         use std::sync::atomic::Ordering::Relaxed;
         let wait = crate::trace::now();
         let mut waited = false;
-        while self.0.load(Relaxed) {
+        while self.busy.load(Relaxed) {
             waited = true;
             if !side() {
                 break;
@@ -814,13 +829,94 @@ impl WriteTurns {
         if let (Some(wait), true) = (wait, waited) {
             crate::trace::since("wait for the file", wait);
         }
-        self.0.store(true, Relaxed);
+        self.busy.store(true, Relaxed);
         let write = crate::trace::span("file write");
-        let written = write_at(file, bytes, offset);
+        let written = self.clock.write_at(file, bytes, offset);
         write.end();
-        self.0.store(false, Relaxed);
+        self.busy.store(false, Relaxed);
         written
     }
+}
+
+/// The time a file's writers spent inside the calls that put its bytes
+/// into the file (positioned writes, or the buffered writer's writes),
+/// summed over the threads that made them ([`Written::write_calls`]).
+#[derive(Default)]
+struct WriteClock {
+    /// Nanoseconds.
+    time: std::sync::atomic::AtomicU64,
+    bytes: std::sync::atomic::AtomicU64,
+}
+
+impl WriteClock {
+    /// `write`, a write call that returns the bytes it wrote, its time
+    /// and bytes added.
+    fn time(&self, write: impl FnOnce() -> std::io::Result<usize>) -> std::io::Result<usize> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let start = std::time::Instant::now();
+        let written = write();
+        let ns = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.time.fetch_add(ns, Relaxed);
+        self.bytes
+            .fetch_add(*written.as_ref().unwrap_or(&0) as u64, Relaxed);
+        written
+    }
+
+    /// [`write_at`], timed.
+    fn write_at(&self, file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()> {
+        self.time(|| write_at(file, buf, offset).map(|()| buf.len()))
+            .map(drop)
+    }
+
+    /// The time and bytes so far.
+    fn spent(&self) -> (std::time::Duration, u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (
+            std::time::Duration::from_nanos(self.time.load(Relaxed)),
+            self.bytes.load(Relaxed),
+        )
+    }
+}
+
+/// A file, its writes timed by a [`WriteClock`]: the buffered writer's
+/// file in [`write_file`].
+struct TimedFile<'a> {
+    file: std::fs::File,
+    clock: &'a WriteClock,
+}
+
+impl Write for TimedFile<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.clock.time(|| self.file.write(buf))
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        // (A file's flush writes nothing: it has no buffer.)
+        self.file.flush()
+    }
+}
+
+/// What a file writer ([`write_file`], [`write_file_streamed`],
+/// [`write_file_streamed_finishing`]) wrote.
+#[derive(Debug, Clone)]
+pub struct Written {
+    /// The final header.
+    pub header: Header,
+    /// Bytes on disk.
+    pub bytes: u64,
+    /// Time inside the calls that put the file's bytes into it (its
+    /// positioned writes, including those of an [`AheadFile`] it
+    /// finishes and of moves within the file; for [`write_file`], its
+    /// buffered writer's writes), summed over the threads that made them:
+    /// the copy into the page cache, which no code of svpack's can make
+    /// shorter. Not the filling, hashing or compressing around them.
+    pub write_calls: std::time::Duration,
+    /// Bytes those calls wrote: each byte the writers put into the file
+    /// once (the zero gaps between sections, which the file's length
+    /// gives, are not written), plus pieces written ahead that were moved
+    /// within the file or written again (`layout::write_sides_ahead`'s
+    /// guess failing).
+    pub write_bytes: u64,
 }
 
 /// Writes `buf` at `offset` of `file`.
@@ -863,7 +959,13 @@ fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()
 /// ahead lies too low by as much; moving them is a copy within the page
 /// cache, where filling them again needs their input, which a one-thread
 /// build frees once the caps are written (`build`).
-fn move_up(file: &std::fs::File, from: u64, to: u64, len: u64) -> std::io::Result<()> {
+fn move_up(
+    file: &std::fs::File,
+    from: u64,
+    to: u64,
+    len: u64,
+    clock: &WriteClock,
+) -> std::io::Result<()> {
     debug_assert!(to >= from);
     const STEP: u64 = 1 << 21;
     let mut buf = vec![0u8; STEP.min(len) as usize];
@@ -872,7 +974,7 @@ fn move_up(file: &std::fs::File, from: u64, to: u64, len: u64) -> std::io::Resul
         let n = STEP.min(end);
         let chunk = &mut buf[..n as usize];
         read_at(file, chunk, from + end - n)?;
-        write_at(file, chunk, to + end - n)?;
+        clock.write_at(file, chunk, to + end - n)?;
         end -= n;
     }
     let stale = (to - from).min(len);
@@ -882,7 +984,7 @@ fn move_up(file: &std::fs::File, from: u64, to: u64, len: u64) -> std::io::Resul
         let mut at = 0;
         while at < stale {
             let n = STEP.min(stale - at);
-            write_at(file, &buf[..n as usize], from + at)?;
+            clock.write_at(file, &buf[..n as usize], from + at)?;
             at += n;
         }
     }
@@ -976,7 +1078,7 @@ pub fn write_file_streamed(
     header: Header,
     mesh: MeshHeader,
     source: &dyn PayloadSource,
-) -> Result<(Header, u64)> {
+) -> Result<Written> {
     let input = (header.input.bytes, header.input.sha256);
     write_file_streamed_finishing(path, header, mesh, source, None, &|| false, move || input)
 }
@@ -1034,6 +1136,9 @@ impl UnitBuffers {
 pub struct WrittenAhead {
     tmp: tempfile::NamedTempFile,
     pieces: Vec<Piece>,
+    /// The writes' time and bytes ([`Written::write_calls`],
+    /// [`Written::write_bytes`]).
+    write_calls: (std::time::Duration, u64),
 }
 
 impl AheadFile {
@@ -1134,6 +1239,7 @@ impl AheadFile {
         WrittenAhead {
             tmp: self.tmp,
             pieces: self.pieces.into_inner().unwrap_or_else(|e| e.into_inner()),
+            write_calls: self.turns.clock.spent(),
         }
     }
 }
@@ -1232,7 +1338,7 @@ pub fn write_file_streamed_finishing(
     ahead: Option<WrittenAhead>,
     side: &(dyn Fn() -> bool + Sync),
     input: impl FnOnce() -> (u64, [u8; 32]),
-) -> Result<(Header, u64)> {
+) -> Result<Written> {
     use rayon::prelude::*;
     let enc = header.options.encoding().map_err(Error::Other)?;
     let per_float = enc.vec4_bytes() / 4;
@@ -1271,6 +1377,10 @@ pub fn write_file_streamed_finishing(
     let size = container_len(&header);
     // Per unit written ahead, its piece's section and CRC.
     let mut done: Vec<Option<(usize, crc32fast::Hasher)>> = (0..units).map(|_| None).collect();
+    // This writer's writes (the moves, the units, the header), after those
+    // of the file written ahead.
+    let turns = WriteTurns::default();
+    let (ahead_time, ahead_bytes) = ahead.as_ref().map_or(Default::default(), |a| a.write_calls);
     let (tmp, from) = match ahead {
         Some(a) => {
             // Where this file puts the piece, if it holds a whole unit.
@@ -1311,7 +1421,8 @@ pub fn write_file_streamed_finishing(
                     continue;
                 }
                 if at != p.at {
-                    move_up(a.tmp.as_file(), p.at, at, p.len).map_err(|e| Error::io(path, e))?;
+                    move_up(a.tmp.as_file(), p.at, at, p.len, &turns.clock)
+                        .map_err(|e| Error::io(path, e))?;
                 }
                 from = from.max(at + p.len);
                 done[p.unit] = Some((p.section, p.crc));
@@ -1328,7 +1439,6 @@ pub fn write_file_streamed_finishing(
     let file = tmp.as_file();
     file.set_len(size).map_err(|e| Error::io(path, e))?;
     preallocate(file, from, size);
-    let turns = WriteTurns::default();
     // Each thread's fill buffer holds the largest unit.
     let widest = (0..units)
         .filter(|&u| done[u].is_none())
@@ -1376,10 +1486,21 @@ pub fn write_file_streamed_finishing(
             "header length changed after placing sections".into(),
         ));
     }
-    write_at(file, &preamble(&hbytes), 0).map_err(|e| Error::io(path, e))?;
-    write_at(file, &hbytes, PREAMBLE_LEN as u64).map_err(|e| Error::io(path, e))?;
+    let clock = &turns.clock;
+    clock
+        .write_at(file, &preamble(&hbytes), 0)
+        .map_err(|e| Error::io(path, e))?;
+    clock
+        .write_at(file, &hbytes, PREAMBLE_LEN as u64)
+        .map_err(|e| Error::io(path, e))?;
     persist(tmp, path)?;
-    Ok((header, size))
+    let (time, bytes) = clock.spent();
+    Ok(Written {
+        header,
+        bytes: size,
+        write_calls: ahead_time + time,
+        write_bytes: ahead_bytes + bytes,
+    })
 }
 
 fn with_path(e: Error, path: &Path) -> Error {
@@ -1951,7 +2072,14 @@ mod tests {
         ] {
             let mut tmp = tempfile::NamedTempFile::new().unwrap();
             tmp.write_all(&data).unwrap();
-            move_up(tmp.as_file(), from as u64, to as u64, len as u64).unwrap();
+            move_up(
+                tmp.as_file(),
+                from as u64,
+                to as u64,
+                len as u64,
+                &WriteClock::default(),
+            )
+            .unwrap();
             let got = std::fs::read(tmp.path()).unwrap();
             let mut want = data.clone();
             want.resize(want.len().max(to + len), 0);

@@ -375,6 +375,7 @@ fn built_from_summary(v: &serde_json::Value) -> Option<Built> {
             layout: ms("layout")?,
             write: ms("write")?,
             total: ms("total")?,
+            write_calls: ms("write_calls")?,
         },
         triangles: v["triangles"].as_u64()?,
         file_bytes: v["file_bytes"].as_u64()?,

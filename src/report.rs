@@ -307,14 +307,15 @@ impl Summary {
         if let Some(t) = &self.timings_ms {
             let _ = write!(
                 o,
-                "\ntimings: load {:.1} ms, weld {:.1} ms, topology {:.1} ms, layout {:.1} ms, write {:.1} ms; total {:.1} ms ({:.0} ns per input triangle)",
+                "\ntimings: load {:.1} ms, weld {:.1} ms, topology {:.1} ms, layout {:.1} ms, write {:.1} ms; total {:.1} ms ({:.0} ns per input triangle); the output's copy into the file {:.1} ms (write calls, all threads)",
                 t.load,
                 t.weld,
                 t.topology,
                 t.layout,
                 t.write,
                 t.total,
-                t.total * 1e6 / self.stats.input_triangles.max(1) as f64
+                t.total * 1e6 / self.stats.input_triangles.max(1) as f64,
+                t.write_calls
             );
             if let Some(peak) = self.peak_memory_bytes {
                 let _ = write!(o, "; peak memory {}", human_bytes(peak));

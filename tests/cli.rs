@@ -261,6 +261,10 @@ fn timings_threads_and_quiet_progress() {
             .sum();
         let total = t["total"].as_f64().unwrap();
         assert!(stages <= total * 1.0001 + 1e-3, "{stages} > {total}");
+        // The copy into the file, summed over the threads that wrote.
+        let copy = t["write_calls"].as_f64().unwrap();
+        let threads: f64 = threads.parse().unwrap();
+        assert!(copy > 0.0 && copy <= threads * total, "write_calls: {t}");
         assert!(v["peak_memory_bytes"].as_u64().unwrap() > 1 << 20);
         // Whichever pages this machine handed out, the field says which.
         assert!(v["cold_memory"].is_boolean(), "cold_memory: {v}");
