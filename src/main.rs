@@ -160,9 +160,10 @@ enum Command {
         #[arg(long)]
         verify: bool,
         /// Add per-stage wall times (load, weld, topology, layout, write,
-        /// total), peak memory and whether the build met cold memory to the
-        /// summary (`timings_ms`, `peak_memory_bytes`, `cold_memory` in
-        /// JSON).
+        /// total), the time inside the calls that copy the output into the
+        /// file (write_calls, summed over threads), peak memory and whether
+        /// the build met cold memory to the summary (`timings_ms`,
+        /// `peak_memory_bytes`, `cold_memory` in JSON).
         #[arg(long)]
         timings: bool,
         /// Write a timeline of the build's threads to FILE, as Chrome trace
