@@ -125,9 +125,9 @@ pub struct BuildOutput {
     /// Loader warnings.
     pub warnings: Vec<String>,
     /// Bytes the build's write calls put into the file
-    /// (`format::Written::write_bytes`): `file_bytes` less the zero gaps
-    /// between sections, plus whatever was moved within the file or
-    /// written again.
+    /// (`format::Written::write_bytes`): `file_bytes` (less the zero gaps
+    /// between sections, in an uncompressed file), plus whatever was
+    /// moved within the file or written again.
     pub write_bytes: u64,
 }
 

@@ -845,6 +845,7 @@ impl WriteTurns {
 struct WriteClock {
     /// Nanoseconds.
     time: std::sync::atomic::AtomicU64,
+    /// Bytes the calls wrote.
     bytes: std::sync::atomic::AtomicU64,
 }
 
