@@ -282,7 +282,12 @@ fn listing_counts(triangles: &[u32], vertices: usize) {
 /// round per run, in ms, and each choice's caps + sides as a multiple of
 /// `auto`'s. Then, in the same rounds, four lights at once
 /// (`evaluate_many_into`, and its caps alone, `cap_signs_many`) against the
-/// same four one at a time, per light.
+/// same four one at a time, per light. Last, `auto`'s one light by step
+/// (`evaluate_ordered`'s three): the caps kernel (its `caps` figure), the
+/// same with the signs paired and read back into input order
+/// (`OrderedEvaluation::cap_signs`; those two steps as the difference of
+/// the fastest, and of the medians), and the sides' sums
+/// (`OrderedEvaluation::sides`).
 fn evaluate(path: &Path) {
     use svpack::evaluate_simd::{disable_avx512, prefer_gather_caps};
     let dir = tempfile::tempdir().unwrap();
@@ -327,6 +332,11 @@ fn evaluate(path: &Path) {
     let mut signs = vec![0i8; ix.len()];
     let mut ev = svpack::verify::Evaluation::default();
     let mut sides: Vec<Vec<i8>> = d.buckets.iter().map(|b| vec![0; b.records()]).collect();
+    let ordered = d.ordered.as_ref().expect("checked above");
+    let (mut paired, mut summed) = (Vec::new(), Vec::new());
+    let mut scratch = Vec::new();
+    let mut in_input_order_signs = vec![0i8; ix.len()];
+    let mut sides_of_steps = sides.clone();
     let per_run = |t: Instant| t.elapsed().as_secs_f64() * 1e3 / 5.0;
     let strategy = svpack::evaluate::Strategy::Reference;
     for _ in 0..40 {
@@ -386,6 +396,21 @@ fn evaluate(path: &Path) {
             }
         }
         alone.push(per_run(t) / four.len() as f64);
+        // `auto`'s one light, step by step.
+        disable_avx512(false);
+        prefer_gather_caps(None);
+        let t = Instant::now();
+        for _ in 0..5 {
+            ordered.cap_signs(light, &mut scratch, &mut in_input_order_signs);
+        }
+        paired.push(per_run(t));
+        let t = Instant::now();
+        for _ in 0..5 {
+            for (b, m) in sides_of_steps.iter_mut().enumerate() {
+                ordered.sides(b, &scratch, m);
+            }
+        }
+        summed.push(per_run(t));
     }
     for (&l, ev) in four.iter().zip(&evs) {
         svpack::verify::evaluate_into(&d, l, strategy, &mut one_by_one);
@@ -397,6 +422,11 @@ fn evaluate(path: &Path) {
     assert!(
         signs == ev.caps && sides == ev.sides,
         "the input-order path differs"
+    );
+    // (The sides' step leaves the records of `leftovers` to its caller.)
+    assert!(
+        in_input_order_signs == ev.caps,
+        "the steps' caps differ from the whole's"
     );
     prefer_gather_caps(None);
     disable_avx512(false);
@@ -421,6 +451,14 @@ fn evaluate(path: &Path) {
     let (caf, cam) = fastest_median(&mut caps_alone);
     println!(
         "four lights, caps alone: at once {cgf:.3} / {cgm:.3} ms per light, one at a time {caf:.3} / {cam:.3} ms"
+    );
+    let (kf, km) = fastest_median(&mut times[0].0);
+    let (pf, pm) = fastest_median(&mut paired);
+    let (sf, sm) = fastest_median(&mut summed);
+    println!(
+        "auto, one light by step: the caps kernel {kf:.3} / {km:.3} ms; with the signs paired and read back into input order {pf:.3} / {pm:.3} ms (those two steps {:.3} / {:.3}); the sides' sums {sf:.3} / {sm:.3} ms",
+        pf - kf,
+        pm - km
     );
     let (gf, gm) = fastest_median(&mut grouped);
     let (af, am) = fastest_median(&mut alone);
