@@ -848,10 +848,22 @@ fn sort_vertices<'w>(
     // weld, one thread, 13.95 → 13.50 ms median of 12 (`stage_probe --
     // weld`, binaries alternated; two threads 7.41 → 7.18 ms of 8).
     let edge = |b: usize| order_key(canonical((xmin + b as f64 / scale) as f32));
+    // Tasks of 64 groups at most, as well as at least. Why the upper
+    // bound: rayon splits a job only while it has splits left or is
+    // stolen, so the thread that started the job sorted its share in long
+    // runs the other could not take a part of, and the other, with
+    // nothing left to steal, waited: in two traced two-thread builds of
+    // the dragon, 0.85 and 2.3 ms of a 9.5 and a 13.4 ms weld. Now the
+    // last task left is 64 groups of the dragon's 1,024. Its sort step
+    // with two threads 4.48–4.59 → 4.13–4.35 ms (seven alternations of
+    // `RECYCLE=1 RAYON_NUM_THREADS=2 cargo run --release --example
+    // stage_probe -- weld target/dragon/dragon.glb`); with one thread,
+    // and on the 5M scene, unchanged within the noise.
     groups
         .into_par_iter()
         .enumerate()
         .with_min_len(64)
+        .with_max_len(64)
         .map_init(
             // (A split's span lasts as long as its scratch.)
             || {
