@@ -30,7 +30,9 @@
 //!    exports the block and reuses its face buffer (104 bytes per face,
 //!    otherwise the largest buffer of a build); the blocks have the same
 //!    name and become one part again. `input_vertices` is the number of
-//!    `v` statements either way. A few recoverable problems are repaired in place and the
+//!    `v` statements either way. tobj's small blocks (a `String` per line,
+//!    each object's buffers) come from an arena (`alloc::arena`) whose
+//!    pages, once the models are freed, the weld reuses. A few recoverable problems are repaired in place and the
 //!    parse is retried (see `repair_vertex_lines`); any other failure is turned
 //!    into a message naming the offending line (`diagnose`).
 //! 4. **Triangulate** (`Triangulator`): triangles pass through; every face
@@ -82,8 +84,13 @@ pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
     let data: FileBytes = data.into();
     // Hashing and parsing are independent; with more than one thread the
     // digest is computed beside the parse (see `digest_while`).
-    let ((input_bytes, input_sha256), streamed) =
-        super::digest_while(&[&data], || guarded(|| parse_streaming(&data)));
+    // The parser's small blocks in an arena that becomes a kept block once
+    // they are freed, for the weld (`alloc::arena`); dropped at the end of
+    // this function, after the soup is built and the models are freed.
+    let arena = crate::alloc::arena::open(ARENA_PER_BYTE * data.len() + ARENA_EXTRA);
+    let ((input_bytes, input_sha256), streamed) = super::digest_while(&[&data], || {
+        guarded(|| arena.scope(|| parse_streaming(&data)))
+    });
     let parsed = match streamed {
         Ok(Some(parsed)) => {
             // The text is no longer needed; free it before building the
@@ -91,7 +98,7 @@ pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
             drop(data);
             Ok(parsed)
         }
-        Ok(None) => guarded(|| parse_owned(data.into_vec())),
+        Ok(None) => guarded(|| arena.scope(|| parse_owned(data.into_vec()))),
         Err(msg) => Err(msg),
     };
     let mut soup = parsed
@@ -101,6 +108,12 @@ pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
     soup.input_sha256 = input_sha256;
     Ok(soup)
 }
+
+/// Address space the parser's arena reserves per byte of input, and beyond
+/// that (`alloc::arena`): nothing is faulted in until used, and an arena
+/// that runs out leaves the rest to malloc.
+const ARENA_PER_BYTE: usize = 4;
+const ARENA_EXTRA: usize = 64 << 20;
 
 /// Runs one step of the pipeline, turning a panic into an error message.
 ///
