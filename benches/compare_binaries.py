@@ -15,7 +15,8 @@ reporting, about two seconds after memory is freed), back-to-back runs get
 the memory the run before freed, still backed, and rested runs get cold
 memory, as a build started on its own does (`alloc::cold_memory_seen`).
 Prints,
-per binary and thread count, the fastest and median whole build, time after parsing
+per binary and thread count, the fastest and median whole build, load (the
+parse and what the loader adds), time after parsing
 (weld + topology + layout + write), weld, topology, layout + write, and the
 largest peak memory; checks that both binaries wrote the same bytes in every run (with
 --allow-different, for versions whose headers are known to differ, it only
@@ -50,7 +51,7 @@ def build(binary, inp, out, threads, replace=False, rest=0.0):
     d = json.loads(run.stdout)
     t = d["timings_ms"]
     return (t["total"] - t["load"], t["layout"] + t["write"], d["peak_memory_bytes"] / 2**20,
-            t["total"], t["weld"], t["topology"])
+            t["total"], t["weld"], t["topology"], t["load"])
 
 
 def main():
@@ -107,16 +108,17 @@ def main():
         print(f"{different} of {len(threads) * rounds} pairs of outputs differed")
     slot_head = " slot |" if by_slot else ""
     print(f"| binary | threads |{slot_head} whole build, fastest / median (ms) "
-          "| after parsing, fastest / median (ms) | weld | topology | layout + write "
+          "| load | after parsing, fastest / median (ms) | weld | topology | layout + write "
           "| peak memory (MiB) |")
-    print("|---|---:|" + ("---|" if by_slot else "") + "---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|" + ("---|" if by_slot else "") + "---:|---:|---:|---:|---:|---:|---:|")
     for (name, t, slot), v in sorted(res.items(),
                                      key=lambda kv: (kv[0][1], kv[0][2], kv[0][0] != "old")):
         def col(i):
             x = sorted(run[i] for run in v)
             return f"{x[0]:.1f} / {x[len(x) // 2]:.1f}"
         slot_cell = f" {slot} |" if by_slot else ""
-        print(f"| {name} | {t} |{slot_cell} {col(3)} | {col(0)} | {col(4)} | {col(5)} | {col(1)} "
+        print(f"| {name} | {t} |{slot_cell} {col(3)} | {col(6)} | {col(0)} | {col(4)} | {col(5)} "
+              f"| {col(1)} "
               f"| {max(x[2] for x in v):.1f} |")
 
 

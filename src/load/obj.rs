@@ -87,6 +87,7 @@ pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
     // The parser's small blocks in an arena that becomes a kept block once
     // they are freed, for the weld (`alloc::arena`); dropped at the end of
     // this function, after the soup is built and the models are freed.
+    warm_up_tobj();
     let arena = crate::alloc::arena::open(ARENA_PER_BYTE * data.len() + ARENA_EXTRA);
     let ((input_bytes, input_sha256), streamed) = super::digest_while(&[&data], || {
         guarded(|| arena.scope(|| parse_streaming(&data)))
@@ -114,6 +115,21 @@ pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
 /// that runs out leaves the rest to malloc.
 const ARENA_PER_BYTE: usize = 4;
 const ARENA_EXTRA: usize = 64 << 20;
+
+/// Parses an empty text once per process, before any arena opens. Why:
+/// tobj's hash maps (ahash's) seed themselves on first use into
+/// process-wide statics (three blocks, 88 bytes), which live as long as the
+/// process; made inside the first parse's arena scope, they held its first
+/// chunk for good, and with it the arena, so that every later parse of the
+/// process used malloc (`alloc::arena`).
+fn warm_up_tobj() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // An empty text is a valid OBJ without models; the result is not
+        // needed.
+        let _ = run_tobj(&mut &b""[..]);
+    });
+}
 
 /// Runs one step of the pipeline, turning a panic into an error message.
 ///
