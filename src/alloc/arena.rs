@@ -29,10 +29,10 @@
 //! so the lists serve most of its churn and the range stays near what is
 //! live at once. Only the thread that ran the scope (the owner) touches the
 //! lists; a block freed on another thread is counted and not reused. When
-//! the [`Arena`] is dropped, the touched part of the range goes to
-//! [`super::keep_or_unmap`] (kept while a [`super::KeepFreed`] guard lives)
-//! by runs of [`CHUNK`]s none of whose blocks is still live, and the rest
-//! of the range is unmapped. A chunk that still holds a live block stays
+//! the [`Arena`] is dropped, the touched part of the range goes to the
+//! allocator's `keep_or_unmap` (kept while a [`super::KeepFreed`] guard
+//! lives) by runs of [`CHUNK`]s none of whose blocks is still live, and
+//! the rest of the range is unmapped. A chunk that still holds a live block stays
 //! the arena's until its last block is freed (a block a scope made for a
 //! process-wide static would hold its chunk for good: the OBJ loader makes
 //! tobj's before its first scope, `load::obj`'s `warm_up_tobj`). One
@@ -96,7 +96,7 @@ static END: AtomicUsize = AtomicUsize::new(0);
 static LIVE: [AtomicBool; MAX_CHUNKS] = [const { AtomicBool::new(false) }; MAX_CHUNKS];
 /// Per chunk: blocks freed by other threads, or by anyone after the close.
 static FREED_ELSEWHERE: [AtomicU32; MAX_CHUNKS] = [const { AtomicU32::new(0) }; MAX_CHUNKS];
-/// Bytes handed to [`super::keep_or_unmap`] by every arena so far.
+/// Bytes handed to the allocator's `keep_or_unmap` by every arena so far.
 static HANDED_OVER: AtomicUsize = AtomicUsize::new(0);
 /// Chunks still the arena's after the close.
 static HELD_CHUNKS: AtomicUsize = AtomicUsize::new(0);
