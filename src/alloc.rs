@@ -11,7 +11,8 @@
 //! allocation of at least [`HUGE_MIN`] bytes, which cuts the fault count of
 //! those buffers by 512.
 //!
-//! Small blocks go to [`std::alloc::System`] unchanged. Blocks of at least
+//! Small blocks go to [`std::alloc::System`] unchanged (but inside an
+//! arena's scope, below). Blocks of at least
 //! [`HUGE_MIN`] bytes get an anonymous mapping of their own, a whole number
 //! of huge pages long, with an `madvise(MADV_HUGEPAGE)` hint. The hint never changes what the program
 //! computes, and a kernel without THP ignores it. On other systems the
@@ -728,8 +729,10 @@ fn large_block(_: usize, _: usize, _: bool) -> *mut u8 {
     unreachable!("large blocks use System off Linux")
 }
 
-// SAFETY: small blocks are System's; large blocks are whole mappings, which
-// are page-aligned (so every alignment up to PAGE holds) and zeroed, and are
+// SAFETY: small blocks are System's, or an arena's (alignment at most 16,
+// and told apart by address: nothing else is placed in an arena's live
+// chunks, `arena::owns`); large blocks are whole mappings, which are
+// page-aligned (so every alignment up to PAGE holds) and zeroed, and are
 // only ever released or resized here (`is_large` of the layout the caller
 // passes back decides which kind a block is, and the GlobalAlloc contract
 // says that is the layout it was allocated with).
