@@ -781,23 +781,11 @@ unsafe impl GlobalAlloc for HugePageAlloc {
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         let align = layout.align();
-        if !is_large(layout.size(), align) && arena::owns(ptr) {
-            if arena::same_block(layout.size(), new_size) {
-                return ptr;
-            }
-            // SAFETY: the caller guarantees a valid size for `align`.
-            let new_layout = unsafe { Layout::from_size_align_unchecked(new_size, align) };
-            // SAFETY: the caller guarantees a non-zero size.
-            let q = unsafe { self.alloc(new_layout) };
-            if !q.is_null() {
-                // SAFETY: both blocks are valid for the smaller size and
-                // distinct; the old one is the arena's, of the old size.
-                unsafe {
-                    std::ptr::copy_nonoverlapping(ptr, q, layout.size().min(new_size));
-                    arena::dealloc(ptr, layout.size());
-                }
-            }
-            return q;
+        // An arena's block stays where it is within its size class, and
+        // otherwise moves like a block crossing HUGE_MIN (below).
+        let in_arena = !is_large(layout.size(), align) && arena::owns(ptr);
+        if in_arena && arena::same_block(layout.size(), new_size) {
+            return ptr;
         }
         match (is_large(layout.size(), align), is_large(new_size, align)) {
             // SAFETY: a mapping of exactly `layout.size()` bytes.
@@ -831,12 +819,13 @@ unsafe impl GlobalAlloc for HugePageAlloc {
                 }
             }
             // SAFETY: the caller's contract.
-            (false, false) => unsafe { System.realloc(ptr, layout, new_size) },
+            (false, false) if !in_arena => unsafe { System.realloc(ptr, layout, new_size) },
             _ => {
-                // Crossing HUGE_MIN: move between the two kinds of block.
+                // Crossing HUGE_MIN, or out of an arena's block: move
+                // between the kinds of block (`dealloc` tells them apart).
                 // SAFETY: the caller guarantees a valid size for `align`.
                 let new_layout = unsafe { Layout::from_size_align_unchecked(new_size, align) };
-                // SAFETY: non-zero size (at least one side is large).
+                // SAFETY: the caller guarantees a non-zero size.
                 let new = unsafe { self.alloc(new_layout) };
                 if !new.is_null() {
                     // SAFETY: both blocks are valid for the smaller size and

@@ -257,10 +257,17 @@ fn release(chunks: std::ops::Range<usize>) {
         }
     }
     if taken > 0 && HELD_CHUNKS.fetch_sub(taken, AcqRel) == taken {
-        BASE.store(0, Release);
-        END.store(0, Release);
-        TAKEN.store(false, Release);
+        end();
     }
+}
+
+/// Ends the arena once no chunk is its: out of the range first (a small
+/// block malloc later places where the range was must not look like the
+/// arena's), then free for the next [`open`].
+fn end() {
+    BASE.store(0, Release);
+    END.store(0, Release);
+    TAKEN.store(false, Release);
 }
 
 /// Bytes of arena chunks handed over so far in this process (to the kept
@@ -384,20 +391,18 @@ impl Drop for Arena {
         // The head before the base and the tail past the touched chunks were
         // never handed out.
         let (mapped, len) = self.mapping;
-        let end = base + used * CHUNK;
+        let touched = base + used * CHUNK;
         // SAFETY: parts of the arena's own mapping that hold no block.
         unsafe {
             if base > mapped {
                 super::sys::unmap(mapped as *mut u8, base - mapped);
             }
-            if mapped + len > end {
-                super::sys::unmap(end as *mut u8, mapped + len - end);
+            if mapped + len > touched {
+                super::sys::unmap(touched as *mut u8, mapped + len - touched);
             }
         }
         if live == 0 {
-            BASE.store(0, Release);
-            END.store(0, Release);
-            TAKEN.store(false, Release);
+            end();
             return;
         }
         release(0..used);
