@@ -32,7 +32,11 @@
 //!    name and become one part again. `input_vertices` is the number of
 //!    `v` statements either way. tobj's small blocks (a `String` per line,
 //!    each object's buffers) come from an arena (`alloc::arena`) whose
-//!    pages, once the models are freed, the weld reuses. A few recoverable problems are repaired in place and the
+//!    pages, once the models are freed, the weld reuses. With two threads or
+//!    more, a text of at least `SPLIT_MIN` bytes is parsed in two parts at
+//!    once (`parse_split`): a second reader gives tobj the first part's `v`
+//!    statements and then the rest, and the models are those of the whole
+//!    text cut into one more block. A few recoverable problems are repaired in place and the
 //!    parse is retried (see `repair_vertex_lines`); any other failure is turned
 //!    into a message naming the offending line (`diagnose`).
 //! 4. **Triangulate** (`Triangulator`): triangles pass through; every face
