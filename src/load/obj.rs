@@ -185,7 +185,13 @@ fn parse_streaming(data: &[u8]) -> Result<Option<Parsed>, String> {
         && rayon::current_num_threads() >= 2
         && let Some(split) = split_point(text)
     {
-        return Ok(parse_split(text, split));
+        match parse_split(text, split) {
+            Split::Parsed(parsed) => return Ok(Some(parsed)),
+            Split::Declined => return Ok(None),
+            // Parsed again by one reader below, whose soup is a one-thread
+            // build's: the build's message then names the same vertex.
+            Split::NotFinite => {}
+        }
     }
     let mut reader = PrescanReader::new(text);
     match run_tobj(&mut reader) {
@@ -234,12 +240,13 @@ const SPLIT_MIN: usize = 2 << 20;
 /// starts one of the same name, as the other reader does, so the models
 /// (and the soup) are the same whoever reads the rest.
 ///
-/// `None` (the caller then parses the whole text again, on one thread, as
-/// [`parse_owned`]) when either part needs what [`parse_streaming`]
-/// declines, and when a position is not finite: the build's message
-/// then names the soup's vertex, whose number the shared vertices (or the
-/// pieces' other boundaries) change.
-fn parse_split(text: &[u8], split: usize) -> Option<Parsed> {
+/// [`Split::Declined`] when either part needs what [`parse_streaming`]
+/// declines (the caller then parses the whole text as [`parse_owned`]),
+/// and [`Split::NotFinite`] when a position is not finite: the build's
+/// message names the soup's vertex, whose number the shared vertices
+/// change, so the caller parses again with one reader, as a one-thread
+/// build does.
+fn parse_split(text: &[u8], split: usize) -> Split {
     let claim = std::sync::atomic::AtomicBool::new(false);
     let mut second = None;
     // The first part on this thread, which may be inside the loader's
@@ -254,21 +261,35 @@ fn parse_split(text: &[u8], split: usize) -> Option<Parsed> {
     join_parts(first, second)
 }
 
-/// What [`first_part`] read: the models (`None` if tobj failed, the text
-/// needs decoding or a position is not finite), the scan, and whether it
-/// stopped at the cut (the other reader claimed the rest).
-type FirstPart = (Option<Vec<tobj::Model>>, Prescan, bool);
+/// What [`parse_split`] gives.
+enum Split {
+    Parsed(Parsed),
+    /// A part cannot be read as [`parse_streaming`] reads a text.
+    Declined,
+    /// A position is not finite.
+    NotFinite,
+}
+
+/// A reader's models: `None` if tobj failed or the text needs decoding,
+/// else the models and whether every position is finite.
+type Models = Option<(Vec<tobj::Model>, bool)>;
+
+/// What [`first_part`] read: its models, the scan, and whether it stopped
+/// at the cut (the other reader claimed the rest).
+type FirstPart = (Models, Prescan, bool);
 
 /// What [`second_part`] read, `None` if the first reader had claimed the
-/// rest: the models (as in [`FirstPart`]), the scan's counts at the cut
-/// and the scan of the whole text.
-type SecondPart = Option<(Option<Vec<tobj::Model>>, Option<Prescan>, Prescan)>;
+/// rest: its models, the scan's counts at the cut and the scan of the
+/// whole text.
+type SecondPart = Option<(Models, Option<Prescan>, Prescan)>;
 
-/// Whether every position of `models` is finite.
-fn finite(models: &[tobj::Model]) -> bool {
-    models
+/// The models tobj read from `reader`, if it read them all.
+fn read_models(reader: &mut PrescanReader<'_>) -> Models {
+    let models = run_tobj(reader).ok().filter(|_| reader.finished())?;
+    let finite = models
         .iter()
-        .all(|m| m.mesh.positions.iter().all(|c| c.is_finite()))
+        .all(|m| m.mesh.positions.iter().all(|c| c.is_finite()));
+    Some((models, finite))
 }
 
 /// [`parse_split`]'s first reader: `text` up to `split`, and on past it if
@@ -277,9 +298,7 @@ fn first_part(text: &[u8], split: usize, claim: &std::sync::atomic::AtomicBool) 
     let mut reader = PrescanReader::new(text);
     reader.stop_at = split;
     reader.claim = Some(claim);
-    let models = run_tobj(&mut reader)
-        .ok()
-        .filter(|m| reader.finished() && finite(m));
+    let models = read_models(&mut reader);
     (models, reader.scanner.scan, reader.stop_at == split)
 }
 
@@ -290,30 +309,37 @@ fn second_part(text: &[u8], split: usize, claim: &std::sync::atomic::AtomicBool)
     }
     let _parse = crate::trace::span("parse: second part");
     let mut reader = PrescanReader::after(text, split);
-    let models = run_tobj(&mut reader)
-        .ok()
-        .filter(|m| reader.finished() && finite(m));
+    let models = read_models(&mut reader);
     let before = reader.before.take();
     Some((models, before, reader.scanner.scan))
 }
 
 /// The two readers' results as one parse (see [`parse_split`]).
-fn join_parts(first: FirstPart, second: SecondPart) -> Option<Parsed> {
+fn join_parts(first: FirstPart, second: SecondPart) -> Split {
     let (models, scan, stopped) = first;
-    let mut models = models?;
+    let Some((mut models, finite)) = models else {
+        return Split::Declined;
+    };
     if !stopped {
         // The first reader read the whole text.
-        return Some(Parsed {
-            models,
-            scan,
-            warnings: Vec::new(),
-        });
+        return match finite {
+            true => Split::Parsed(Parsed {
+                models,
+                scan,
+                warnings: Vec::new(),
+            }),
+            false => Split::NotFinite,
+        };
     }
-    let (second, before, whole) = second?;
-    let (second, before) = (second?, before?);
+    let Some((Some((second, second_finite)), Some(before), whole)) = second else {
+        return Split::Declined;
+    };
     // Both readers scanned the same bytes before the cut (a check).
     if before.vertices != scan.vertices || before.faces != scan.faces {
-        return None;
+        return Split::Declined;
+    }
+    if !(finite && second_finite) {
+        return Split::NotFinite;
     }
     // tobj ends a text with its current model even if it has no faces (a
     // cut just after an `o` line): nothing of the soup, and not a model
@@ -323,7 +349,7 @@ fn join_parts(first: FirstPart, second: SecondPart) -> Option<Parsed> {
     }
     models.extend(second);
     // The second reader's scan went over the whole text.
-    Some(Parsed {
+    Split::Parsed(Parsed {
         models,
         scan: whole,
         warnings: Vec::new(),
@@ -335,10 +361,12 @@ fn join_parts(first: FirstPart, second: SecondPart) -> Option<Parsed> {
 /// line (a text of a few long lines).
 ///
 /// The first reader parses `text[..split]`; the second the `v` statements
-/// of that part again and then the rest. tobj takes about as long per byte
-/// of a `v` statement as of an `f` statement, so with `V(x)` the bytes of
-/// `v` lines before `x` and `n` the text's length, the two are equal where
-/// `2·split − V(split) = n`. `V` is estimated from 64 samples of 16 KiB
+/// of that part again and then the rest. Counting a byte of either kind
+/// the same, with `V(x)` the bytes of `v` lines before `x` and `n` the
+/// text's length, the two are equal where `2·split − V(split) = n` (on
+/// the 5M scene the readers then end within 30 ms of each other; where
+/// the vertices all come first, both parts hold all of them and only the
+/// faces decide). `V` is estimated from 64 samples of 16 KiB
 /// spread over the text (a file's vertex lines may all come first, as in
 /// the dragon's, or before each object's faces, as in the generated
 /// scenes), so finding the point reads about 1 MiB. Then the cut moves to
@@ -2408,7 +2436,7 @@ mod tests {
     /// run first) or by the first (`false`), on this thread.
     fn split_parse(text: &[u8], split: usize, second_first: bool) -> Option<Parsed> {
         let claim = std::sync::atomic::AtomicBool::new(false);
-        if second_first {
+        let joined = if second_first {
             let second = second_part(text, split, &claim);
             let first = first_part(text, split, &claim);
             // The first reader stopped at the cut (unless it failed first).
@@ -2419,6 +2447,10 @@ mod tests {
             let second = second_part(text, split, &claim);
             assert!(second.is_none(), "the rest read twice");
             join_parts(first, second)
+        };
+        match joined {
+            Split::Parsed(parsed) => Some(parsed),
+            Split::Declined | Split::NotFinite => None,
         }
     }
 
@@ -2563,9 +2595,10 @@ mod tests {
     /// The same across pieces: a first part of several pieces, some with no
     /// `v` statement at all (nothing of them reaches tobj: an empty piece
     /// must not read as the end), a model cut into blocks, and a second
-    /// part of several pieces; and a non-finite position declines. Caught:
-    /// `fill_buf` taking one piece where a loop is needed (the parse ends
-    /// early).
+    /// part of several pieces; and a non-finite position sends the text to
+    /// one reader. Caught: `fill_buf` taking one piece where a loop is
+    /// needed (the parse ends early); a non-finite position sent to the
+    /// whole-text path instead (its models are not cut into blocks).
     #[test]
     fn a_split_parse_of_many_pieces_is_the_whole_parse() {
         let mut text = String::from("o big\n");
@@ -2601,9 +2634,21 @@ mod tests {
             assert_eq!(by_value(second), whole, "cut at {split}");
             assert_eq!(by_value(first), whole, "cut at {split}");
         }
+        // A non-finite position: the split gives up, and the text is read
+        // by one reader, whose models (cut into blocks) a one-thread build
+        // gets, so that its message names the same vertex.
         let nan = text.replacen(&format!("v 3 {} ", n - 1), &format!("v nan {} ", n - 1), 1);
         assert_ne!(nan, text);
-        assert!(split_parse(nan.as_bytes(), data.len() / 2, true).is_none());
+        let nan = nan.as_bytes();
+        let claim = std::sync::atomic::AtomicBool::new(false);
+        let second = second_part(nan, data.len() / 2, &claim);
+        let first = first_part(nan, data.len() / 2, &claim);
+        assert!(matches!(join_parts(first, second), Split::NotFinite));
+        let mut one = PrescanReader::new(nan);
+        let one = run_tobj(&mut one).unwrap();
+        assert!(nan.len() >= SPLIT_MIN);
+        let streamed = parse_streaming(nan).unwrap().expect("streamed");
+        assert_eq!(debug_models(&streamed.models), debug_models(&one));
     }
 
     /// Where the cut goes: a line's start, past continued lines, at an
