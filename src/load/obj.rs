@@ -1138,26 +1138,18 @@ impl<'a> PrescanReader<'a> {
             });
             cut = true;
         }
-        if cut {
-            // Either reader of a split parse ends tobj's model at the cut
-            // and starts one of the same name, so that the models are the
-            // same whichever reads the rest. A repeated statement must be
-            // whole.
-            if sc.continued.is_some() || sc.group_continued {
-                self.no_cut = true;
-                return Err(std::io::Error::other("no place to cut the text"));
-            }
-            match &sc.group_line {
-                Some(line) => self.piece.extend_from_slice(line),
-                None => self.piece.extend_from_slice(b"o unnamed_object"),
-            }
-            self.piece.push(b'\n');
-            sc.model_faces = sc.scan.faces;
-        } else if sc.scan.faces - sc.model_faces >= MODEL_BLOCK_FACES && !sc.group_continued {
+        // A repeated statement must be whole.
+        if cut && (sc.continued.is_some() || sc.group_continued) {
+            self.no_cut = true;
+            return Err(std::io::Error::other("no place to cut the text"));
+        }
+        if cut || (sc.scan.faces - sc.model_faces >= MODEL_BLOCK_FACES && !sc.group_continued) {
             // Repeat the current model's `o`/`g` statement: tobj ends the
             // model there, exports it and reuses its face buffer. The
             // models have the same name, and `build_soup` merges them
-            // back into one part.
+            // back into one part. At a split parse's cut either reader
+            // does so, so that the models are the same whichever reads
+            // the rest.
             match &sc.group_line {
                 Some(line) => self.piece.extend_from_slice(line),
                 None => self.piece.extend_from_slice(b"o unnamed_object"),
