@@ -207,9 +207,11 @@ fn parse_streaming(data: &[u8]) -> Result<Option<Parsed>, String> {
 }
 
 /// Texts at least this long are parsed in two parts at once
-/// ([`parse_split`]) when the calling rayon pool has two threads or more:
-/// below it, tobj takes a few milliseconds, and the second part's share
-/// of the first part's `v` statements costs about what a thread saves.
+/// ([`parse_split`]) when the calling rayon pool has two threads or more.
+/// A threshold chosen, not measured: 2 MiB of OBJ take tobj about 15 ms
+/// here, against about 0.5 ms for finding the cut of a 4 MB text and
+/// 0.1 ms for the second part's thread to start (timers in a local build,
+/// benches/ROUNDS.md, Fifty-sixth round).
 const SPLIT_MIN: usize = 2 << 20;
 
 /// [`parse_streaming`]'s parse on two threads: tobj reads `text[..split]`
