@@ -2461,10 +2461,11 @@ mod tests {
     }
 
     /// The split parse with the rest claimed by the second reader (`true`,
-    /// run first) or by the first (`false`), on this thread.
-    fn split_parse(text: &[u8], split: usize, second_first: bool) -> Option<Parsed> {
+    /// run first) or by the first (`false`), on this thread; the reader
+    /// that did not claim the rest read none of it.
+    fn split_join(text: &[u8], split: usize, second_first: bool) -> Split {
         let claim = std::sync::atomic::AtomicBool::new(false);
-        let joined = if second_first {
+        if second_first {
             let second = second_part(text, split, &claim);
             let first = first_part(text, split, &claim);
             // The first reader stopped at the cut (unless it failed first).
@@ -2478,8 +2479,12 @@ mod tests {
             let second = second_part(text, split, &claim);
             assert!(second.is_none(), "the rest read twice");
             join_parts(first, second)
-        };
-        match joined {
+        }
+    }
+
+    /// [`split_join`]'s parse, if it gives one.
+    fn split_parse(text: &[u8], split: usize, second_first: bool) -> Option<Parsed> {
+        match split_join(text, split, second_first) {
             Split::Parsed(parsed) => Some(parsed),
             Split::Declined | Split::OneReader => None,
         }
@@ -2671,10 +2676,8 @@ mod tests {
         let nan = text.replacen(&format!("v 3 {} ", n - 1), &format!("v nan {} ", n - 1), 1);
         assert_ne!(nan, text);
         let nan = nan.as_bytes();
-        let claim = std::sync::atomic::AtomicBool::new(false);
-        let second = second_part(nan, data.len() / 2, &claim);
-        let first = first_part(nan, data.len() / 2, &claim);
-        assert!(matches!(join_parts(first, second), Split::OneReader));
+        let joined = split_join(nan, data.len() / 2, true);
+        assert!(matches!(joined, Split::OneReader));
         let mut one = PrescanReader::new(nan);
         let one = run_tobj(&mut one).unwrap();
         assert!(nan.len() >= SPLIT_MIN);
@@ -2693,14 +2696,7 @@ mod tests {
         let first_cut = text.find("v 0 0 0").unwrap();
         for split in (first_cut..data.len()).filter(|&i| data[i - 1] == b'\n') {
             for second_first in [true, false] {
-                let claim = std::sync::atomic::AtomicBool::new(false);
-                let joined = if second_first {
-                    let second = second_part(data, split, &claim);
-                    join_parts(first_part(data, split, &claim), second)
-                } else {
-                    let first = first_part(data, split, &claim);
-                    join_parts(first, second_part(data, split, &claim))
-                };
+                let joined = split_join(data, split, second_first);
                 assert!(matches!(joined, Split::OneReader), "cut at {split}");
             }
         }
