@@ -272,14 +272,30 @@ impl IndexedCaps {
     /// `table[2t + 1]` holds `1 − s` (so that no byte is negative). Written
     /// by the kernel as it computes the signs, each `s` bit for bit
     /// `cap_signs`'; `table.len()` must be twice [`IndexedCaps::len`].
-    pub fn cap_sign_pairs(&self, lights: &[Light; LIGHT_GROUP], table: &mut [u32]) {
+    ///
+    /// Also the same signs as a byte per triangle into `packed` (its length
+    /// [`IndexedCaps::len`]): light `i`'s `1 + s` in bits `2i` and `2i + 1`,
+    /// made from each chunk's entries while they are in cache.
+    pub fn cap_sign_pairs(
+        &self,
+        lights: &[Light; LIGHT_GROUP],
+        table: &mut [u32],
+        packed: &mut [u8],
+    ) {
         assert_eq!(table.len(), 2 * self.sorted.len(), "table size mismatch");
+        assert_eq!(packed.len(), self.sorted.len(), "packed size mismatch");
         let on_corner = lights.iter().any(|&l| self.light_on_a_corner(l));
         table
             .par_chunks_mut(2 * CHUNK)
+            .zip(packed.par_chunks_mut(CHUNK))
             .zip(self.sorted.par_chunks(CHUNK))
             .zip(self.odd.par_chunks(CHUNK))
-            .for_each(|((o, t), odd)| self.signs_many(t, odd, *lights, on_corner, &mut Pairs(o)));
+            .for_each(|(((o, p), t), odd)| {
+                self.signs_many(t, odd, *lights, on_corner, &mut Pairs(o));
+                for (p, o) in p.iter_mut().zip(o.chunks_exact(2)) {
+                    *p = packed_byte(o[0]);
+                }
+            });
     }
 
     /// One chunk of a group of `N` lights into `sink`, through the widest
@@ -637,6 +653,16 @@ impl<const N: usize> Sink<N> for Bytes<'_, N> {
 /// The biased pairs of [`IndexedCaps::cap_sign_pairs`], two entries per
 /// triangle.
 struct Pairs<'a>(&'a mut [u32]);
+
+/// The byte of [`IndexedCaps::cap_sign_pairs`]' `packed` from a triangle's
+/// `1 + s` entry: light `i`'s `1 + s` (0, 1 or 2, byte `i` of `plus`) in
+/// bits `2i, 2i + 1` (each shift brings one byte's two bits down; the
+/// bits it brings above them are cut off).
+#[inline(always)]
+fn packed_byte(plus: u32) -> u8 {
+    const _: () = assert!(LIGHT_GROUP == 4, "four lights' two bits fill a byte");
+    (plus | plus >> 6 | plus >> 12 | plus >> 18) as u8
+}
 
 /// Triangle `i`'s entries of the pairs from its lights' signs `s`.
 #[inline(always)]

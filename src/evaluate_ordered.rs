@@ -66,12 +66,16 @@
 //! their signs as one `u32` per pair entry, a byte per light, biased by one
 //! so that a record's slots add as plain integers without carries; the
 //! sides read one entry per slot for the four lights; the signs go to input
-//! order as one `u32` per triangle. On the dragon, one thread: 1.22–1.27 ns
-//! per side record per light at the fastest, against 2.43–2.55 ns for the
-//! same lights one at a time (`cargo run --release --example stage_probe
-//! -- evaluate target/dragon/dragon.glb`, its `four lights` lines, four
-//! runs; the caps alone 0.61–0.64 against 1.11–1.26 ms per light; a local
-//! probe put the sides at 0.5 ms per light against 0.85 ms).
+//! order as one byte per triangle, two bits per light, read back through
+//! the triangle's evaluation number as for one light. On the dragon, one
+//! thread (twenty-eighth round, an AMD EPYC, when the signs went to input
+//! order as one `u32` per triangle): 1.22–1.27 ns per side record per
+//! light at the fastest, against 2.43–2.55 ns for the same lights one at a
+//! time (`cargo run --release --example stage_probe -- evaluate
+//! target/dragon/dragon.glb`, its `four lights` lines, four runs; the caps
+//! alone 0.61–0.64 against 1.11–1.26 ms per light; a local probe put the
+//! sides at 0.5 ms per light against 0.85 ms). For the byte per triangle,
+//! see [`OrderedEvaluation::group_cap_signs`].
 
 use crate::evaluate_indexed::{IndexedCaps, LIGHT_GROUP, chunks_of};
 use crate::multiplicity::Light;
@@ -290,8 +294,25 @@ impl OrderedEvaluation {
     /// entries as plain `u32`s, each byte at most `2k` with no carry into
     /// the next, and subtracts `k` from each byte. One load and one add
     /// per slot for the four lights, where the one-light sums take a load
-    /// and an add per slot per light, and the triangle's place in input
-    /// order is read once for the group.
+    /// and an add per slot per light.
+    ///
+    /// To input order as for one light: a pass in input order reads each
+    /// triangle's signs through its evaluation number (`rank`), from a
+    /// byte per triangle that holds the four lights' `1 + s` in two bits
+    /// each (871 KB on the dragon, in the second-level cache), and writes
+    /// the four lights' arrays in order. Until the fifty-seventh round each
+    /// triangle's `1 + s` entry (a `u32`, read in order from the 7 MB
+    /// table) was written to its place in a table in input order, and the
+    /// lights' arrays were cut from that: on the dragon, one thread, a
+    /// local probe put that scatter at 2.24 ms and the cut at 0.75 ms per
+    /// group, where the byte per triangle costs 0.2 ms more in the caps
+    /// pass and its read-back 0.99 ms. The whole evaluation, four lights
+    /// at once, per light, fastest of 40 alternated rounds, five
+    /// alternations (`cargo run --release --example stage_probe --
+    /// evaluate target/dragon/dragon.glb`, its `four lights` line; an Intel
+    /// Xeon; benches/ROUNDS.md, Fifty-seventh round): 2.19–2.47 → 1.70–1.79
+    /// ms (1.67–1.89 → 1.30–1.37 ns per side record), 1.33–1.43 → 1.86–2.05
+    /// times as fast as the same lights one at a time in the same runs.
     pub fn group_cap_signs(
         &self,
         lights: &[Light; LIGHT_GROUP],
@@ -303,35 +324,31 @@ impl OrderedEvaluation {
             assert_eq!(o.len(), n, "caps size mismatch");
         }
         scratch.table.resize(2 * n, 0);
-        self.caps.cap_sign_pairs(lights, &mut scratch.table);
-        // Back to input order: each triangle's entry to its place in a
-        // table in input order, then one array per light from that table,
-        // in order. Writing each light's byte straight to its place, which
-        // needs no table in input order, made the whole evaluation slower
-        // on the dragon (1.76–1.77 against 1.58–1.61 ms a light, a local
-        // probe; benches/ROUNDS.md, twenty-eighth round).
-        scratch.input.resize(n, 0);
-        let input = ScatterTo(scratch.input.as_mut_ptr());
-        scratch
-            .table
-            .par_chunks(2 * CHUNK)
-            .zip(self.order.par_chunks(CHUNK))
-            .for_each(|(table, order)| {
-                let input = input.ptr();
-                for (pair, &t) in table.chunks_exact(2).zip(order) {
-                    // SAFETY: `order` is a permutation of 0..n (`new`
-                    // numbers each triangle once), so every write is inside
-                    // `input` and no two tasks write the same place.
-                    unsafe { *input.add(t as usize) = pair[0] };
-                }
-            });
+        scratch.packed.resize(n, 0);
+        self.caps
+            .cap_sign_pairs(lights, &mut scratch.table, &mut scratch.packed);
+        let packed = &scratch.packed[..];
+        // A chunk's bytes first, then each light's array from them: the
+        // read-back loop as tight as one light's, and the unpacking a loop
+        // over bytes in order.
         chunks_of(out, CHUNK)
             .into_par_iter()
-            .zip(scratch.input.par_chunks(CHUNK))
-            .for_each(|(mut out, input)| {
+            .zip(self.rank.par_chunks(CHUNK))
+            .for_each(|(mut out, rank)| {
+                let mut bytes = [0u8; CHUNK];
+                let bytes = &mut bytes[..rank.len()];
+                for (b, rank) in bytes.chunks_mut(LINE).zip(rank.chunks(LINE)) {
+                    crate::hint::prefetch_stream(rank.as_ptr());
+                    for (b, &r) in b.iter_mut().zip(rank) {
+                        // SAFETY: `rank` is a permutation of 0..n (`new`
+                        // numbers each triangle once), so every read is
+                        // inside `packed`.
+                        *b = unsafe { *packed.get_unchecked(r as usize) };
+                    }
+                }
                 for (l, out) in out.iter_mut().enumerate() {
-                    for (o, &e) in out.iter_mut().zip(input) {
-                        *o = ((e >> (8 * l)) as u8).wrapping_sub(1) as i8;
+                    for (o, &b) in out.iter_mut().zip(&*bytes) {
+                        *o = (b >> (2 * l) & 3) as i8 - 1;
                     }
                 }
             });
@@ -424,28 +441,13 @@ impl OrderedEvaluation {
 }
 
 /// The scratch of a group of lights: the group's signed table in
-/// evaluation order, and its `1 + s` entries in input order (see
-/// [`OrderedEvaluation::group_cap_signs`]). Kept between groups like the
-/// other buffers.
+/// evaluation order, and its signs as a byte per triangle, also in
+/// evaluation order (see [`OrderedEvaluation::group_cap_signs`]). Kept
+/// between groups like the other buffers.
 #[derive(Debug, Clone, Default)]
 pub struct GroupScratch {
     table: Vec<u32>,
-    input: Vec<u32>,
-}
-
-/// A slice the caps' tasks share, each writing elements no other task
-/// writes.
-struct ScatterTo<T>(*mut T);
-
-// SAFETY: the tasks write disjoint elements (see `group_cap_signs`).
-unsafe impl<T> Sync for ScatterTo<T> {}
-
-impl<T> ScatterTo<T> {
-    /// The slice's first element. A method, so that closures capture the
-    /// `Sync` wrapper, not the raw pointer inside it.
-    fn ptr(&self) -> *mut T {
-        self.0
-    }
+    packed: Vec<u8>,
 }
 
 /// The slots of one bucket as offsets over a base per block of [`BLOCK`]
