@@ -265,19 +265,9 @@ impl OrderedEvaluation {
         let signs = &*signs;
         out.par_chunks_mut(CHUNK)
             .zip(self.rank.par_chunks(CHUNK))
-            .for_each(|(out, rank)| {
-                // A line of evaluation numbers at a time, the stream
-                // prefetched (`hint::prefetch_stream`).
-                for (out, rank) in out.chunks_mut(LINE).zip(rank.chunks(LINE)) {
-                    crate::hint::prefetch_stream(rank.as_ptr());
-                    for (o, &r) in out.iter_mut().zip(rank) {
-                        // SAFETY: `rank` is a permutation of 0..n (`new`
-                        // numbers each triangle once), so every read is
-                        // inside `signs`.
-                        *o = unsafe { *signs.get_unchecked(r as usize) };
-                    }
-                }
-            });
+            // SAFETY: `rank` is a permutation of 0..n (`new` numbers each
+            // triangle once), and `signs` holds n signs.
+            .for_each(|(out, rank)| unsafe { read_back(signs, rank, out) });
     }
 
     /// [`OrderedEvaluation::cap_signs`] for a group of [`LIGHT_GROUP`]
@@ -338,15 +328,9 @@ impl OrderedEvaluation {
             .for_each(|(mut out, rank)| {
                 let mut bytes = [0u8; CHUNK];
                 let bytes = &mut bytes[..rank.len()];
-                for (b, rank) in bytes.chunks_mut(LINE).zip(rank.chunks(LINE)) {
-                    crate::hint::prefetch_stream(rank.as_ptr());
-                    for (b, &r) in b.iter_mut().zip(rank) {
-                        // SAFETY: `rank` is a permutation of 0..n (`new`
-                        // numbers each triangle once), so every read is
-                        // inside `packed`.
-                        *b = unsafe { *packed.get_unchecked(r as usize) };
-                    }
-                }
+                // SAFETY: `rank` is a permutation of 0..n (`new` numbers
+                // each triangle once), and `packed` holds n bytes.
+                unsafe { read_back(packed, rank, bytes) };
                 for (l, out) in out.iter_mut().enumerate() {
                     for (o, &b) in out.iter_mut().zip(&*bytes) {
                         *o = (b >> (2 * l) & 3) as i8 - 1;
@@ -449,6 +433,24 @@ impl OrderedEvaluation {
 pub struct GroupScratch {
     table: Vec<u32>,
     packed: Vec<u8>,
+}
+
+/// `out[i] = table[rank[i]]` for every `i` of `out` (as long as `rank`):
+/// a table in evaluation order read back into input order, a line of
+/// evaluation numbers at a time, the stream prefetched
+/// (`hint::prefetch_stream`). One light's signs and a group's bytes.
+///
+/// # Safety
+/// Every element of `rank` must be below `table.len()`.
+#[inline(always)]
+unsafe fn read_back<T: Copy>(table: &[T], rank: &[u32], out: &mut [T]) {
+    for (out, rank) in out.chunks_mut(LINE).zip(rank.chunks(LINE)) {
+        crate::hint::prefetch_stream(rank.as_ptr());
+        for (o, &r) in out.iter_mut().zip(rank) {
+            // SAFETY: the caller's.
+            *o = unsafe { *table.get_unchecked(r as usize) };
+        }
+    }
 }
 
 /// The slots of one bucket as offsets over a base per block of [`BLOCK`]
