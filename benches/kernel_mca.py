@@ -1,0 +1,140 @@
+#!/usr/bin/env python3
+"""Static throughput of the evaluator's caps kernels, by llvm-mca.
+
+Usage: python3 benches/kernel_mca.py BINARY [MCPU]
+
+BINARY must be built with `-C symbol-mangling-version=v0` (so that each
+monomorphised copy of `evaluate_indexed::avx512vl` is named with its
+generic arguments); `bash benches/kernel_mca.sh` builds one and runs this.
+MCPU is llvm-mca's CPU model (default `icelake-server`, the Intel Xeon of
+the rounds since the fifty-first; `znver4` was the AMD EPYC's, if the
+installed llvm-mca knows it).
+
+Why: this guest exposes no hardware counters (`perf stat` reports cycles
+and instructions as "not supported"), so where a kernel's time goes cannot
+be counted. llvm-mca reads each copy's inner loop (one block of eight
+triangles) and gives, from the CPU model, the cycles per block its ports
+allow and which ports bound it. Measured time above that bound is waiting
+(cache misses, the front end); at it, only fewer instructions on the
+busiest ports make the kernel faster.
+
+Per copy: the loop's instructions and micro-ops, its loads (instructions
+with a memory source: the loads of corner ids, of position rows, of the
+odd flags, and the prefetches), llvm-mca's cycles per block over 200
+iterations and its throughput bound, the two busiest port groups, and the
+cycles per triangle (per triangle and light for a group of four).
+"""
+
+import re
+import subprocess
+import sys
+
+# The copies timed by `stage_probe -- evaluate` (its `auto` row: point
+# lights, no light on a corner): one light into bytes, four into the
+# group's pairs. Generic arguments: TEST, POINT, lights, sink.
+KERNELS = [
+    ("one light", "svpack::evaluate_indexed::avx512vl::<false, true, 1, svpack::evaluate_indexed::Bytes<1>>", 1),
+    ("four lights at once", "svpack::evaluate_indexed::avx512vl::<false, true, 4, svpack::evaluate_indexed::Pairs>", 4),
+]
+LANES = 8
+
+
+def symbols(binary):
+    """(address, demangled name) of every text symbol, by address."""
+    out = subprocess.run(["nm", "-C", "--defined-only", "-n", binary], capture_output=True, text=True, check=True).stdout
+    syms = []
+    for line in out.splitlines():
+        parts = line.split(" ", 2)
+        if len(parts) == 3 and parts[1] in "tTwW":
+            syms.append((int(parts[0], 16), parts[2]))
+    return syms
+
+
+def disassemble(binary, start, stop):
+    """[(address, instruction text)] of [start, stop), Intel syntax."""
+    out = subprocess.run(
+        ["objdump", "-d", "--no-show-raw-insn", "-M", "intel", f"--start-address={start}", f"--stop-address={stop}", binary],
+        capture_output=True, text=True, check=True,
+    ).stdout
+    code = []
+    for line in out.splitlines():
+        m = re.match(r"\s*([0-9a-f]+):\s+(.*)$", line)
+        if m:
+            code.append((int(m.group(1), 16), m.group(2).strip()))
+    return code
+
+
+def inner_loop(code):
+    """The body of the largest backward conditional jump's loop that does
+    the contract's products (`vmulps`): the block loop."""
+    best = None
+    for i, (addr, text) in enumerate(code):
+        m = re.match(r"j\w+\s+([0-9a-f]+)\b", text)
+        if not m or text.startswith("jmp"):
+            continue
+        target = int(m.group(1), 16)
+        if target >= addr:
+            continue
+        body = [t for a, t in code[: i + 1] if a >= target]
+        if any(t.startswith("vmulps") for t in body) and (best is None or len(body) > len(best)):
+            best = body
+    if best is None:
+        sys.exit("no block loop with vmulps found")
+    # The closing jump names an address, which llvm-mca cannot resolve.
+    return [re.sub(r"\s*<[^>]*>", "", t) for t in best[:-1]]
+
+
+def mca(body, mcpu):
+    asm = ".intel_syntax noprefix\n" + "\n".join(body) + "\n"
+    out = subprocess.run(
+        ["llvm-mca", f"-mcpu={mcpu}", "-iterations=200", "-all-stats=false"],
+        input=asm, capture_output=True, text=True,
+    )
+    if out.returncode != 0:
+        # A model without the copy's instructions (AVX-512 on znver3).
+        return None, out.stderr.strip().splitlines()[-1]
+    return out.stdout, None
+
+
+def main():
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
+    binary = sys.argv[1]
+    mcpu = sys.argv[2] if len(sys.argv) > 2 else "icelake-server"
+    syms = symbols(binary)
+    names = [n for _, n in syms]
+    print(f"llvm-mca -mcpu={mcpu}, one block of {LANES} triangles per iteration")
+    print("| kernel | instructions | micro-ops | loads | cycles per block | bound | busiest ports | cycles per triangle (and light) |")
+    print("|---|---:|---:|---:|---:|---:|---|---:|")
+    for label, name, lights in KERNELS:
+        if name not in names:
+            sys.exit(f"{name}: not in {binary} (built with -C symbol-mangling-version=v0?)")
+        i = names.index(name)
+        start, stop = syms[i][0], syms[i + 1][0]
+        body = inner_loop(disassemble(binary, start, stop))
+        report, error = mca(body, mcpu)
+        if report is None:
+            print(f"| {label} | {len(body)} | not modelled: {error} |")
+            continue
+        iterations = int(re.search(r"Iterations:\s+(\d+)", report).group(1))
+        cycles = int(re.search(r"Total Cycles:\s+(\d+)", report).group(1)) / iterations
+        uops = int(re.search(r"Total uOps:\s+(\d+)", report).group(1)) / iterations
+        bound = float(re.search(r"Block RThroughput:\s+([\d.]+)", report).group(1))
+        # Resource names, then the pressure per iteration on each.
+        # (the ids of a resource with several units: [12.0], [12.1]).
+        head, tail = report.split("Resource pressure per iteration:")
+        resources = dict(re.findall(r"\[([\d.]+)\]\s*-\s*(\S+)", head))
+        ids = re.findall(r"\[([\d.]+)\]", tail.splitlines()[1])
+        values = tail.splitlines()[2].split()
+        ports = sorted(
+            ((float(v), resources[k] + (f"[{k}]" if "." in k else "")) for k, v in zip(ids, values) if v != "-"),
+            reverse=True,
+        )
+        loads = sum(1 for t in body if re.search(r"PTR \[", t) and not re.match(r"(v?mov\w*)\s+(XMM|YMM|ZMM|Q|D)WORD PTR", t))
+        busiest = ", ".join(f"{p} {v:.1f}" for v, p in ports[:3])
+        per_tri = cycles / LANES / lights
+        print(f"| {label} | {len(body)} | {uops:.0f} | {loads} | {cycles:.1f} | {bound:.1f} | {busiest} | {per_tri:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

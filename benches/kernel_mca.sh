@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# The evaluator's caps kernels' static throughput (llvm-mca), for a host
+# whose guest hides the hardware counters. Builds svpack with v0 symbol
+# mangling into target/mca (about two minutes the first time), then runs
+# benches/kernel_mca.py on it. MCPU=znver4 (or any llvm-mca CPU) to model
+# another CPU; default icelake-server.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+for tool in llvm-mca objdump nm; do
+  command -v "$tool" >/dev/null || { echo "$tool not found (Debian: apt-get install llvm binutils)" >&2; exit 1; }
+done
+RUSTFLAGS="-C symbol-mangling-version=v0" CARGO_TARGET_DIR=target/mca \
+  cargo build --release --quiet --bin svpack
+python3 benches/kernel_mca.py target/mca/release/svpack "${MCPU:-icelake-server}"
