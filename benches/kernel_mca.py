@@ -7,8 +7,9 @@ BINARY must be built with `-C symbol-mangling-version=v0` (so that each
 monomorphised copy of `evaluate_indexed::avx512vl` is named with its
 generic arguments); `bash benches/kernel_mca.sh` builds one and runs this.
 MCPU is llvm-mca's CPU model (default `icelake-server`, the Intel Xeon of
-the rounds since the fifty-first; `znver4` was the AMD EPYC's, if the
-installed llvm-mca knows it).
+the rounds since the fifty-first; llvm 14, Debian's here, has no Zen 4
+model, and its `znver3` has no AVX-512, so it models the one-light copy
+only).
 
 Why: this guest exposes no hardware counters (`perf stat` reports cycles
 and instructions as "not supported"), so where a kernel's time goes cannot
@@ -21,7 +22,7 @@ busiest ports make the kernel faster.
 Per copy: the loop's instructions and micro-ops, its loads (instructions
 with a memory source: the loads of corner ids, of position rows, of the
 odd flags, and the prefetches), llvm-mca's cycles per block over 200
-iterations and its throughput bound, the two busiest port groups, and the
+iterations and its throughput bound, the three busiest ports, and the
 cycles per triangle (per triangle and light for a group of four).
 """
 

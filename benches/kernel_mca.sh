@@ -2,8 +2,8 @@
 # The evaluator's caps kernels' static throughput (llvm-mca), for a host
 # whose guest hides the hardware counters. Builds svpack with v0 symbol
 # mangling into target/mca (about two minutes the first time), then runs
-# benches/kernel_mca.py on it. MCPU=znver4 (or any llvm-mca CPU) to model
-# another CPU; default icelake-server.
+# benches/kernel_mca.py on it. MCPU=CPU (any CPU llvm-mca knows, such as
+# znver3) models another CPU; default icelake-server.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 for tool in llvm-mca objdump nm; do
