@@ -91,6 +91,8 @@ def mca(body, mcpu):
         ["llvm-mca", f"-mcpu={mcpu}", "-iterations=200", "-all-stats=false"],
         input=asm, capture_output=True, text=True,
     )
+    if "not a recognized processor" in out.stderr:
+        sys.exit(f"llvm-mca: {out.stderr.strip().splitlines()[0]}")
     if out.returncode != 0:
         # A model without the copy's instructions (AVX-512 on znver3).
         return None, out.stderr.strip().splitlines()[-1]
@@ -104,12 +106,14 @@ def main():
     mcpu = sys.argv[2] if len(sys.argv) > 2 else "icelake-server"
     syms = symbols(binary)
     names = [n for _, n in syms]
+    for _, name, _ in KERNELS:
+        if name not in names:
+            sys.exit(f"{name}: not in {binary} (built with -C symbol-mangling-version=v0?)")
+    mca(["nop"], mcpu)  # exits on a CPU llvm-mca does not know
     print(f"llvm-mca -mcpu={mcpu}, one block of {LANES} triangles per iteration")
     print("| kernel | instructions | micro-ops | loads | cycles per block | bound | busiest ports | cycles per triangle (and light) |")
     print("|---|---:|---:|---:|---:|---:|---|---:|")
     for label, name, lights in KERNELS:
-        if name not in names:
-            sys.exit(f"{name}: not in {binary} (built with -C symbol-mangling-version=v0?)")
         i = names.index(name)
         start, stop = syms[i][0], syms[i + 1][0]
         body = inner_loop(disassemble(binary, start, stop))
