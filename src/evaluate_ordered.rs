@@ -290,8 +290,8 @@ impl OrderedEvaluation {
     /// triangle's signs through its evaluation number (`rank`), from a
     /// byte per triangle that holds the four lights' `1 + s` in two bits
     /// each (871 KB on the dragon, small enough for this Xeon's 1.25 MiB
-    /// second-level cache), and writes
-    /// the four lights' arrays in order. Until the fifty-seventh round each
+    /// second-level cache), and writes the four lights' arrays in order.
+    /// Until the fifty-seventh round each
     /// triangle's `1 + s` entry (a `u32`, read in order from the 7 MB
     /// table) was written to its place in a table in input order, and the
     /// lights' arrays were cut from that: on the dragon, one thread, a
