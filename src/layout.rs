@@ -299,6 +299,24 @@ impl Plan {
 /// of the round's base and of this loop alternated: the dragon's sides
 /// 8.99–9.71 → 6.51–6.57 ms (three alternations), the 5M scene's
 /// 53.3–54.3 → 40.3 ms (two).
+///
+/// Since the fifty-eighth round the edge arrays are read unchecked (their
+/// lengths asserted once per block) and the outputs written through
+/// their starts and lengths, k = 2's cursor in a local: the loop's k = 2
+/// path had reloaded 15 values from the stack for each edge (bounds,
+/// lengths and pointers the registers could not hold), 34 loads an edge
+/// in all, and llvm-mca's Ice Lake model put it at 18.1 cycles an edge,
+/// bound by the two load ports; now 9 reloads, 27 loads and 15.1 cycles
+/// (`llvm-mca -mcpu=icelake-server` on the path's instructions,
+/// from a build with v0 symbol names as `benches/kernel_mca.sh` makes).
+/// The dragon's sides, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release
+/// --example stage_probe -- fill-write target/dragon/dragon.glb` (its
+/// lines with the caps from the soup, less the caps), eight alternations,
+/// fastest / median: alone 7.96 / 16.31 → 6.79 / 13.83 ms, each unit
+/// written 8.46 / 17.60 → 7.07 / 14.85 ms; the 5M scene's
+/// (`target/targets/scene_5000000.obj`, four alternations, in a slow
+/// phase of the host) alone 127.3 / 129.4 → 113.1 / 114.6 ms, written
+/// 116.9 / 148.5 → 124.1 / 130.6 ms.
 fn fill_sides(
     max_mult: u32,
     welded: &Welded,
@@ -315,40 +333,83 @@ fn fill_sides(
         opp,
     } = edges;
     let len = edges.len();
-    // (Clamped so that the prefetches' reads stay inside the arrays; the
-    // loop body runs only when there is an edge, so `len >= 1` there.)
+    let (first, end) = (blk * BLOCK, ((blk + 1) * BLOCK).min(len));
+    if first >= end {
+        return;
+    }
+    // Checked once here, so that the loop reads the edge arrays unchecked.
+    assert!(
+        b.len() >= len && opp_start.len() > len,
+        "edge arrays of unequal length"
+    );
+    // (Clamped so that the prefetches' reads stay inside the arrays.)
     let last_pair = opp.len().saturating_sub(2);
+    // An edge ending at most here has its pair in `opp` and takes the
+    // k = 2 path; none does when records hold one opposite. One value
+    // for both tests: every value the loop keeps beyond the registers is
+    // a load per edge, and the loop is bound by its loads (benches/
+    // ROUNDS.md, Fifty-eighth round).
+    let pair_limit = if k_max >= 2 { opp.len() } else { 0 };
+    // Each output's start and length, and how far it is written (the
+    // records of k = 2, almost all of a closed mesh's, in a local).
+    let mut sink: [(*mut f32, usize); MAX_MAX_MULT as usize + 1] =
+        [(std::ptr::null_mut(), 0); MAX_MAX_MULT as usize + 1];
+    for (s, o) in sink.iter_mut().zip(outs.iter_mut()) {
+        *s = (o.as_mut_ptr(), o.len());
+    }
     let mut at = [0usize; MAX_MAX_MULT as usize + 1];
-    for e in blk * BLOCK..((blk + 1) * BLOCK).min(len) {
+    let mut at2 = 0;
+    for e in first..end {
+        // SAFETY (every `get_unchecked` below): `e < len` and `ahead <
+        // len`, which index `a`, `b` and `opp_start` (asserted above), and
+        // `e + 1 <= len` indexes `opp_start`; `s` and `s + 1` index `opp`
+        // when `t <= pair_limit <= opp.len()` and `t == s + 2`, and the
+        // prefetch's pair is clamped to `last_pair`.
+        let ahead = (e + AHEAD).min(len - 1);
         // The rows of an edge `AHEAD` on: its B and its first two
         // opposites. One prefetch per row, not both ends of it (a row
         // straddles two lines once in eight), unlike the caps': in this
         // loop 6.98 → 6.14 ms on the dragon, 41.8 → 38.6 ms on the 5M
         // scene (the scratch probe); 32 edges ahead measured the same, 16
         // and 128 slower, no prefetch 54.3 ms on the 5M scene.
-        let ahead = (e + AHEAD).min(len - 1);
-        prefetch_row(pos, b[ahead]);
-        if opp.len() >= 2 {
-            let s = (opp_start[ahead] as usize).min(last_pair);
-            prefetch_row(pos, opp[s]);
-            prefetch_row(pos, opp[s + 1]);
+        unsafe {
+            prefetch_row(pos, *b.get_unchecked(ahead));
+            if pair_limit >= 2 {
+                let s = (*opp_start.get_unchecked(ahead) as usize).min(last_pair);
+                prefetch_row(pos, *opp.get_unchecked(s));
+                prefetch_row(pos, *opp.get_unchecked(s + 1));
+            }
         }
-        let (s, t) = (opp_start[e] as usize, opp_start[e + 1] as usize);
-        if t.wrapping_sub(s) == 2 && k_max >= 2 {
+        let (s, t) = unsafe {
+            (
+                *opp_start.get_unchecked(e) as usize,
+                *opp_start.get_unchecked(e + 1) as usize,
+            )
+        };
+        let (ea, eb) = unsafe { (*a.get_unchecked(e), *b.get_unchecked(e)) };
+        if t.wrapping_sub(s) == 2 && t <= pair_limit {
             // An edge of two triangles: one record of k = 2.
-            let out = &mut outs[2][at[2]..at[2] + 16];
-            at[2] += 16;
-            let ids = [a[e], b[e], opp[s], opp[s + 1]];
+            let ids = unsafe { [ea, eb, *opp.get_unchecked(s), *opp.get_unchecked(s + 1)] };
+            // SAFETY: output 2 is `sink[2]`, written from `at2` on.
+            let out = unsafe { records(sink[2], at2, 16) };
+            at2 += 16;
             put_rows::<4, false>(pos, ids, [2.0, 2.0, 1.0, 1.0], out);
             continue;
         }
-        let (pa, pb) = (pos[a[e] as usize], pos[b[e] as usize]);
+        let (pa, pb) = (pos[ea as usize], pos[eb as usize]);
         let opp = &opp[s..t];
         let n = opp.len() as f32;
         for chunk in opp.chunks(k_max) {
             let k = chunk.len();
-            let out = &mut outs[k][at[k]..at[k] + (2 + k) * 4];
-            at[k] += (2 + k) * 4;
+            let (cursor, n_floats) = (if k == 2 { at2 } else { at[k] }, (2 + k) * 4);
+            // SAFETY: output k is `sink[k]`, written from its cursor on
+            // (`at2` for k = 2, else `at[k]`), which moves past them.
+            let out = unsafe { records(sink[k], cursor, n_floats) };
+            if k == 2 {
+                at2 += n_floats;
+            } else {
+                at[k] += n_floats;
+            }
             out[..4].copy_from_slice(&[pa[0], pa[1], pa[2], k as f32]);
             out[4..8].copy_from_slice(&[pb[0], pb[1], pb[2], n]);
             for (slot, &o) in out[8..].chunks_exact_mut(4).zip(chunk) {
@@ -357,6 +418,22 @@ fn fill_sides(
             }
         }
     }
+}
+
+/// Floats `at..at + n` of an output of [`fill_sides`] (its start and
+/// length); panics past its end.
+///
+/// # Safety
+/// `out` must be a live `&mut [f32]`'s start and length, not otherwise
+/// used while the result is, and no two calls may hand out the same
+/// floats (the caller moves `at` past them).
+#[inline(always)]
+unsafe fn records<'a>(out: (*mut f32, usize), at: usize, n: usize) -> &'a mut [f32] {
+    let (ptr, len) = out;
+    assert!(at + n <= len, "side records past their output");
+    // SAFETY: floats `at..at + n` are inside the output (just checked)
+    // and, by the caller's, handed out once.
+    unsafe { std::slice::from_raw_parts_mut(ptr.add(at), n) }
 }
 
 /// Asks for the line of position `i` of `pos` (no bounds: a prefetch
@@ -390,7 +467,7 @@ fn put_rows<const N: usize, const CANON: bool>(
 ) {
     assert_eq!(out.len(), 4 * N);
     #[cfg(target_arch = "x86_64")]
-    if ids.iter().all(|&i| (i as usize) + 1 < pos.len()) {
+    if ids.iter().fold(0, |m, &i| m.max(i)) as usize + 1 < pos.len() {
         use std::arch::x86_64::*;
         // SAFETY: SSE2 is part of x86-64. Each row's 16 bytes lie inside
         // the table (its index is below the last), and `out` holds the
