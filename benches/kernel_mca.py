@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Static throughput of the evaluator's caps kernels, by llvm-mca.
+"""Static throughput of the evaluator's caps kernels and the build's
+side-record fill, by llvm-mca.
 
 Usage: python3 benches/kernel_mca.py BINARY [MCPU]
 
@@ -11,6 +12,10 @@ the rounds since the fifty-first; llvm 14, Debian's here, has no Zen 4
 model, and its `znver3` has no AVX-512, so it models the one-light copy
 only).
 
+The fill (`layout::fill_sides`) is read on its path for an edge of two
+triangles, the record of every edge of a closed mesh: the loop the
+backward branch of that path closes, one edge per iteration.
+
 Why: this guest exposes no hardware counters (`perf stat` reports cycles
 and instructions as "not supported"), so where a kernel's time goes cannot
 be counted. llvm-mca reads each copy's inner loop (one block of eight
@@ -19,25 +24,40 @@ allow and which ports bound it. Measured time above that bound is waiting
 (cache misses, the front end); at it, only fewer instructions on the
 busiest ports make the kernel faster.
 
-Per copy: the loop's instructions and micro-ops, its loads (instructions
-with a memory source: the loads of corner ids, of position rows, of the
-odd flags, and the prefetches), llvm-mca's cycles per block over 200
-iterations and its throughput bound, the three busiest ports, and the
-cycles per triangle (per triangle and light for a group of four).
+Per loop: its instructions and micro-ops, its loads (instructions with a
+memory source, the prefetches included; in brackets those that reload a
+value from the stack, one the registers could not hold), llvm-mca's
+cycles per iteration over 200 iterations and its throughput bound, the
+three busiest ports, and the cycles per unit (per triangle, per triangle
+and light for a group of four, per edge for the fill).
 """
 
 import re
 import subprocess
 import sys
 
-# The copies timed by `stage_probe -- evaluate` (its `auto` row: point
-# lights, no light on a corner): one light into bytes, four into the
-# group's pairs. Generic arguments: TEST, POINT, lights, sink.
+def does_products(body):
+    """A caps kernel's block loop: the contract's products (`vmulps`)."""
+    return any(t.startswith("vmulps") for t in body)
+
+
+def writes_a_record(body):
+    """The fill's k = 2 path: the prefetches of the edge 64 on and the
+    record's four 16-byte stores (`put_rows`)."""
+    stores = sum(1 for t in body if re.match(r"movups\s+XMMWORD PTR \[", t))
+    return any(t.startswith("prefetcht0") for t in body) and stores >= 4
+
+
+# (label, function, what its loop's body holds, units per iteration,
+# unit). The caps kernels are the copies timed by `stage_probe --
+# evaluate` (its `auto` row: point lights, no light on a corner): one
+# light into bytes, four into the group's pairs; generic arguments TEST,
+# POINT, lights, sink. Their loop is a block of 8 triangles.
 KERNELS = [
-    ("one light", "svpack::evaluate_indexed::avx512vl::<false, true, 1, svpack::evaluate_indexed::Bytes<1>>", 1),
-    ("four lights at once", "svpack::evaluate_indexed::avx512vl::<false, true, 4, svpack::evaluate_indexed::Pairs>", 4),
+    ("caps, one light", "svpack::evaluate_indexed::avx512vl::<false, true, 1, svpack::evaluate_indexed::Bytes<1>>", does_products, 8, "triangle"),
+    ("caps, four lights at once", "svpack::evaluate_indexed::avx512vl::<false, true, 4, svpack::evaluate_indexed::Pairs>", does_products, 32, "triangle and light"),
+    ("sides' fill, k = 2", "svpack::layout::fill_sides", writes_a_record, 1, "edge"),
 ]
-LANES = 8
 
 
 def symbols(binary):
@@ -65,9 +85,9 @@ def disassemble(binary, start, stop):
     return code
 
 
-def inner_loop(code):
-    """The body of the largest backward conditional jump's loop that does
-    the contract's products (`vmulps`): the block loop."""
+def inner_loop(code, holds):
+    """The body of the largest loop a backward conditional jump closes
+    whose body `holds`."""
     best = None
     for i, (addr, text) in enumerate(code):
         m = re.match(r"j\w+\s+([0-9a-f]+)\b", text)
@@ -77,10 +97,10 @@ def inner_loop(code):
         if target >= addr:
             continue
         body = [t for a, t in code[: i + 1] if a >= target]
-        if any(t.startswith("vmulps") for t in body) and (best is None or len(body) > len(best)):
+        if holds(body) and (best is None or len(body) > len(best)):
             best = body
     if best is None:
-        sys.exit("no block loop with vmulps found")
+        sys.exit(f"no loop that {holds.__name__} found")
     # The closing jump names an address, which llvm-mca cannot resolve.
     return [re.sub(r"\s*<[^>]*>", "", t) for t in best[:-1]]
 
@@ -106,20 +126,20 @@ def main():
     mcpu = sys.argv[2] if len(sys.argv) > 2 else "icelake-server"
     syms = symbols(binary)
     names = [n for _, n in syms]
-    for _, name, _ in KERNELS:
+    for _, name, *_ in KERNELS:
         if name not in names:
             sys.exit(f"{name}: not in {binary} (built with -C symbol-mangling-version=v0?)")
     mca(["nop"], mcpu)  # exits on a CPU llvm-mca does not know
-    print(f"llvm-mca -mcpu={mcpu}, one block of {LANES} triangles per iteration")
-    print("| kernel | instructions | micro-ops | loads | cycles per block | bound | busiest ports | cycles per triangle (and light) |")
-    print("|---|---:|---:|---:|---:|---:|---|---:|")
-    for label, name, lights in KERNELS:
+    print(f"llvm-mca -mcpu={mcpu}")
+    print("| loop | units per iteration | instructions | micro-ops | loads (from the stack) | cycles per iteration | bound | busiest ports | cycles per unit |")
+    print("|---|---|---:|---:|---:|---:|---:|---|---:|")
+    for label, name, holds, units, unit in KERNELS:
         i = names.index(name)
         start, stop = syms[i][0], syms[i + 1][0]
-        body = inner_loop(disassemble(binary, start, stop))
+        body = inner_loop(disassemble(binary, start, stop), holds)
         report, error = mca(body, mcpu)
         if report is None:
-            print(f"| {label} | {len(body)} | not modelled: {error} |")
+            print(f"| {label} | {units} | {len(body)} | not modelled: {error} |")
             continue
         iterations = int(re.search(r"Iterations:\s+(\d+)", report).group(1))
         cycles = int(re.search(r"Total Cycles:\s+(\d+)", report).group(1)) / iterations
@@ -135,10 +155,11 @@ def main():
             ((float(v), resources[k] + (f"[{k}]" if "." in k else "")) for k, v in zip(ids, values) if v != "-"),
             reverse=True,
         )
-        loads = sum(1 for t in body if re.search(r"PTR \[", t) and not re.match(r"(v?mov\w*)\s+(XMM|YMM|ZMM|Q|D)WORD PTR", t))
+        load_list = [t for t in body if re.search(r"PTR \[", t) and not re.match(r"(v?mov\w*)\s+(XMM|YMM|ZMM|Q|D)WORD PTR", t)]
+        loads, reloads = len(load_list), sum(1 for t in load_list if "[rsp" in t)
         busiest = ", ".join(f"{p} {v:.1f}" for v, p in ports[:3])
-        per_tri = cycles / LANES / lights
-        print(f"| {label} | {len(body)} | {uops:.0f} | {loads} | {cycles:.1f} | {bound:.1f} | {busiest} | {per_tri:.2f} |")
+        per_unit = cycles / units
+        print(f"| {label} | {units} ({unit}) | {len(body)} | {uops:.0f} | {loads} ({reloads}) | {cycles:.1f} | {bound:.1f} | {busiest} | {per_unit:.2f} |")
 
 
 if __name__ == "__main__":

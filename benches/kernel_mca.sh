@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The evaluator's caps kernels' static throughput (llvm-mca), for a host
-# whose guest hides the hardware counters. Builds svpack with v0 symbol
+# The evaluator's caps kernels' and the sides' fill's static throughput
+# (llvm-mca), for a host whose guest hides the hardware counters. Builds svpack with v0 symbol
 # mangling into target/mca (about two minutes the first time), then runs
 # benches/kernel_mca.py on it. MCPU=CPU (any CPU llvm-mca knows, such as
 # znver3) models another CPU; default icelake-server.

@@ -306,9 +306,10 @@ impl Plan {
 /// path had reloaded 15 values from the stack for each edge (bounds,
 /// lengths and pointers the registers could not hold), 34 loads an edge
 /// in all, and llvm-mca's Ice Lake model put it at 18.1 cycles an edge,
-/// bound by the two load ports; now 9 reloads, 27 loads and 15.1 cycles
-/// (`llvm-mca -mcpu=icelake-server` on the path's instructions,
-/// from a build with v0 symbol names as `benches/kernel_mca.sh` makes).
+/// bound by the two load ports; now 10 reloads, 27 loads and 15.1 cycles
+/// (`bash benches/kernel_mca.sh`, its fill row; the base's from
+/// `python3 benches/kernel_mca.py` on a build of 14f05e0 with v0 symbol
+/// names).
 /// The dragon's sides, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release
 /// --example stage_probe -- fill-write target/dragon/dragon.glb` (its
 /// lines with the caps from the soup, less the caps), eight alternations,
