@@ -18,11 +18,10 @@ backward branch of that path closes, one edge per iteration.
 
 Why: this guest exposes no hardware counters (`perf stat` reports cycles
 and instructions as "not supported"), so where a kernel's time goes cannot
-be counted. llvm-mca reads each copy's inner loop (one block of eight
-triangles) and gives, from the CPU model, the cycles per block its ports
-allow and which ports bound it. Measured time above that bound is waiting
-(cache misses, the front end); at it, only fewer instructions on the
-busiest ports make the kernel faster.
+be counted. llvm-mca reads each inner loop and gives, from the CPU model,
+the cycles per iteration its ports allow and which ports bound it.
+Measured time above that bound is waiting (cache misses, the front end);
+at it, only fewer instructions on the busiest ports make the loop faster.
 
 Per loop: its instructions and micro-ops, its loads (instructions with a
 memory source, the prefetches included; in brackets those that reload a
@@ -35,6 +34,7 @@ and light for a group of four, per edge for the fill).
 import re
 import subprocess
 import sys
+
 
 def does_products(body):
     """A caps kernel's block loop: the contract's products (`vmulps`)."""
