@@ -110,7 +110,8 @@ impl Edges {
 ///    outnumber records). Where the CPU has AVX-512 and BMI2 (and the mesh
 ///    fewer than 2^28 vertices), each listing is unpacked by one `pdep`
 ///    (`sort_range_bmi2`) and a vertex with at most 8 listings (so at most
-///    16 records) is done in registers (`emit_range_avx512`): 14.5–15.0 →
+///    16 records) is done in registers (`emit_range_avx512`, two vertices
+///    at a time where both have at most 4 listings): 14.5–15.0 →
 ///    7.1–7.6 ms on the dragon, one thread, on the earlier Intel host
 ///    (`cargo run --release --example stage_probe -- passes`, the two
 ///    versions alternated; 9.1–9.3 ms with the kernel for up to 8 records
@@ -1418,6 +1419,25 @@ fn emit_vertex<const TRI: bool>(
 /// 5M scene (three). Over 2^28 vertices, where the keys would not fit,
 /// the scalar emit runs ([`KEY_IDS`]).
 ///
+/// Two vertices at a time: where a vertex and the next both have at most 4
+/// listings (as 74% of the dragon's vertices have), their first 4 slots go
+/// in the two 256-bit halves of one 512-bit register, through the same
+/// network (`sort8x2`: no layer pairs lanes of different halves) and one
+/// finish whose compresses put the second vertex's records and edges right
+/// after the first's. Why: the path for one such vertex waits on its own
+/// chain of load, compare, network and compress: llvm-mca's Ice Lake model
+/// gives it 37.2 cycles a vertex, against 18.7 that its ports allow; the
+/// pair takes 56.2 cycles, 28.1 a vertex (each path cut by hand from the
+/// disassembly of a build as `benches/kernel_mca.sh` makes it, its branches
+/// left out, and given to `llvm-mca -mcpu=icelake-server`). This Intel Xeon
+/// runs a 512-bit operation whole; on the AMD EPYC of the earlier rounds,
+/// which runs it as two halves, the same idea was slower
+/// (benches/ROUNDS.md, "Thirty-sixth round"). One thread, `RECYCLE=1
+/// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe -- passes
+/// FILE`, the emit pass's fastest and median of alternated runs: the dragon
+/// 9.08 / 9.36 → 8.42 / 8.75 ms (ten), the 5M scene 53.41 / 54.37 → 42.69 /
+/// 42.75 ms (three).
+///
 /// # Safety
 /// The CPU must have AVX-512F and AVX-512VL.
 #[cfg(target_arch = "x86_64")]
@@ -1550,11 +1570,127 @@ unsafe fn emit_range_avx512(
         out.records += k;
         out.edges += edges;
     };
+    // The network of `sort8` on two vertices' keys at once, one in each
+    // 256-bit half of a 512-bit register (the halves never meet: every
+    // partner lies in the lane's own half).
+    let reverse2 = |s: __m512i| _mm512_permutex_epi64::<0x4E>(_mm512_shuffle_epi32::<0x1B>(s));
+    let layer2 = |s: __m512i, partner: __m512i, upper: u16| {
+        _mm512_mask_blend_epi32(
+            upper,
+            _mm512_min_epu32(s, partner),
+            _mm512_max_epu32(s, partner),
+        )
+    };
+    let sort8x2 = |s: __m512i| {
+        let s = layer2(s, _mm512_shuffle_epi32::<0xB1>(s), 0xAAAA);
+        let s = layer2(s, _mm512_shuffle_epi32::<0x4E>(s), 0xCCCC);
+        let s = layer2(s, _mm512_shuffle_epi32::<0xD8>(s), 0x4444);
+        let s = layer2(s, reverse2(s), 0xF0F0);
+        let s = layer2(s, _mm512_shuffle_epi32::<0x4E>(s), 0xCCCC);
+        layer2(s, _mm512_shuffle_epi32::<0xB1>(s), 0xAAAA)
+    };
+    // Each lane's rank in its half; the first lane of each lane's half;
+    // 1 in the second vertex's half (its id is the first's plus 1).
+    let rank8x2 = _mm512_set_epi32(7, 6, 5, 4, 3, 2, 1, 0, 7, 6, 5, 4, 3, 2, 1, 0);
+    let half = _mm512_set_epi32(8, 8, 8, 8, 8, 8, 8, 8, 0, 0, 0, 0, 0, 0, 0, 0);
+    let second = _mm512_set_epi32(1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0);
     let mut spilled = 0;
     let mut kout = KernelOut::of(&mut group);
-    for v in vertices {
+    let mut next_v = vertices.start;
+    while next_v < vertices.end {
+        let v = next_v;
+        next_v += 1;
         let out = &mut kout;
         let (from, l) = listings.of(v);
+        if l <= 4 && v + 1 < vertices.end {
+            let (_, l1) = listings.of(v + 1);
+            if l1 <= 4 {
+                // Two vertices of at most 4 listings each, one in each half
+                // of a 512-bit register: their first 4 slots each.
+                let slots = &listings.pairs[from..from + 2 * SLOTS];
+                // SAFETY: the loads read the first 32 bytes of each
+                // vertex's 64 in `slots`.
+                let x = unsafe {
+                    _mm512_inserti64x4::<1>(
+                        _mm512_castsi256_si512(_mm256_loadu_si256(slots.as_ptr().cast())),
+                        _mm256_loadu_si256(slots[SLOTS..].as_ptr().cast()),
+                    )
+                };
+                let swapped = _mm512_ror_epi64::<32>(x);
+                let words = (((1u32 << (2 * l)) - 1) | (((1u32 << (2 * l1)) - 1) << 8)) as u16;
+                let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555 & words;
+                let records = (0x5555 & words) | (lower << 1);
+                let k0 = (records as u8).count_ones() as usize;
+                let k = records.count_ones() as usize;
+                assert!(out.records + k <= out.len, "topology: records miscounted");
+                let keys = _mm512_mask_blend_epi32(
+                    records,
+                    none,
+                    _mm512_or_si512(_mm512_slli_epi32::<4>(x), rank8x2),
+                );
+                let sorted = sort8x2(keys);
+                // Each vertex's records in its half's first lanes (the
+                // rest all ones); the masks of both halves' records.
+                let kmask = (((1u32 << k0) - 1) | (((1u32 << (k - k0)) - 1) << 8)) as u16;
+                let larger = _mm512_srli_epi32::<4>(sorted);
+                let opposite = _mm512_permutexvar_epi32(
+                    _mm512_or_si512(_mm512_and_si512(sorted, _mm512_set1_epi32(15)), half),
+                    swapped,
+                );
+                // The key after each: the first half's last lane has none
+                // (not the second vertex's first key).
+                let next = _mm512_srli_epi32::<4>(_mm512_mask_mov_epi32(
+                    _mm512_alignr_epi32::<1>(none, sorted),
+                    0x0080,
+                    none,
+                ));
+                let ends = _mm512_mask_cmpneq_epu32_mask(kmask, larger, next);
+                let edges = ends.count_ones() as usize;
+                let first_end = (out.base + out.records as u32 + 1) as i32;
+                let end = _mm512_add_epi32(
+                    _mm512_set1_epi32(first_end),
+                    _mm512_mask_add_epi32(rank8x2, 0xFF00, rank8x2, _mm512_set1_epi32(k0 as i32)),
+                );
+                let (a_at, b_at, end_at) = (
+                    _mm512_maskz_compress_epi32(
+                        ends,
+                        _mm512_add_epi32(_mm512_set1_epi32(v as i32), second),
+                    ),
+                    _mm512_maskz_compress_epi32(ends, larger),
+                    _mm512_maskz_compress_epi32(ends, end),
+                );
+                // SAFETY: as in `finish`, for 16 slots.
+                unsafe {
+                    _mm512_mask_storeu_epi32(
+                        out.opp.add(out.records).cast(),
+                        ((1u32 << k) - 1) as u16,
+                        _mm512_maskz_compress_epi32(kmask, opposite),
+                    );
+                    let (a, b, e) = (
+                        out.a.add(out.edges),
+                        out.b.add(out.edges),
+                        out.end.add(out.edges),
+                    );
+                    if out.edges + 16 <= out.len {
+                        _mm512_storeu_si512(a.cast(), a_at);
+                        _mm512_storeu_si512(b.cast(), b_at);
+                        _mm512_storeu_si512(e.cast(), end_at);
+                    } else {
+                        let emask = ((1u32 << edges) - 1) as u16;
+                        _mm512_mask_storeu_epi32(a.cast(), emask, a_at);
+                        _mm512_mask_storeu_epi32(b.cast(), emask, b_at);
+                        _mm512_mask_storeu_epi32(e.cast(), emask, end_at);
+                    }
+                    crate::hint::prefetch_stream(a);
+                    crate::hint::prefetch_stream(b);
+                    crate::hint::prefetch_stream(e);
+                }
+                out.records += k;
+                out.edges += edges;
+                next_v += 1;
+                continue;
+            }
+        }
         if l <= 8 {
             // The vertex's 8 slots in one load, whatever its number of
             // listings (the lanes past them are not looked at).
@@ -2405,6 +2541,50 @@ mod tests {
         // SAFETY: the emit wrote the first `edges` slots of each.
         let edge = |i: usize| std::array::from_fn(|x| unsafe { arrays[x][i].assume_init() });
         (opp, (0..edges).map(edge).collect())
+    }
+
+    /// The AVX-512 emit's path for two vertices at once (each with at most
+    /// 4 listings, one in each half of a register) ends each vertex's
+    /// edges at its own last record, even when its last larger endpoint is
+    /// the next vertex's first, and gives what the scalar emit gives for
+    /// every pair of listing counts from 0 to 4, with larger endpoints
+    /// shared between the two. Caught: the first vertex's last lane
+    /// compared with the second vertex's first key (with 8 records, its
+    /// last edge then ran on into the next vertex's).
+    #[test]
+    fn paired_vertices_end_their_own_edges() {
+        if !simd_available() {
+            return;
+        }
+        // Vertex 0 is the smallest corner of 4 triangles (8 records, the
+        // last on vertex 9); vertex 1 of one, on 9 and 10.
+        let tris = [0, 2, 3, 0, 4, 5, 0, 6, 7, 0, 8, 9, 1, 9, 10];
+        let (opp, edges) = emit_alone(&tris, true);
+        assert_eq!(edges.iter().filter(|e| e[0] == 0).count(), 8);
+        assert_eq!((opp.clone(), edges.clone()), emit_alone(&tris, false));
+        for l0 in 0..=4u32 {
+            for l1 in 0..=4u32 {
+                let mut tris = Vec::new();
+                for i in 0..l0 {
+                    tris.extend_from_slice(&[0, 3 + 2 * i, 2 + 2 * i]);
+                }
+                for j in 0..l1 {
+                    // 1 as the smaller corner, or as the middle one above
+                    // 0 (a listing under each: past 4 under 0, the pair
+                    // is not taken together).
+                    match j % 2 {
+                        0 => tris.extend_from_slice(&[1, 9 - 2 * j, 20 + j]),
+                        _ => tris.extend_from_slice(&[30 + j, 1, 0]),
+                    }
+                }
+                tris.extend_from_slice(&[2, 12, 13]);
+                assert_eq!(
+                    emit_alone(&tris, true),
+                    emit_alone(&tris, false),
+                    "{l0} and {l1} listings"
+                );
+            }
+        }
     }
 
     /// The AVX-512 emit's 32-bit keys hold every id below `KEY_IDS` − 1,
