@@ -1423,20 +1423,30 @@ fn emit_vertex<const TRI: bool>(
 /// listings (as 74% of the dragon's vertices have), their first 4 slots go
 /// in the two 256-bit halves of one 512-bit register, through the same
 /// network (`sort8x2`: no layer pairs lanes of different halves) and one
-/// finish whose compresses put the second vertex's records and edges right
-/// after the first's. Why: the path for one such vertex waits on its own
-/// chain of load, compare, network and compress: llvm-mca's Ice Lake model
-/// gives it 37.2 cycles a vertex, against 18.7 that its ports allow; the
-/// pair takes 56.2 cycles, 28.1 a vertex (each path cut by hand from the
-/// disassembly of a build as `benches/kernel_mca.sh` makes it, its branches
-/// left out, and given to `llvm-mca -mcpu=icelake-server`). This Intel Xeon
-/// runs a 512-bit operation whole; on the AMD EPYC of the earlier rounds,
-/// which runs it as two halves, the same idea was slower
+/// finish (`finish2`) whose compresses put the second vertex's records and
+/// edges right after the first's. Why: the path for one such vertex waits
+/// on its own chain of load, compare, network and compress: llvm-mca's Ice
+/// Lake model gives it 37.2 cycles a vertex, against 18.7 that its ports
+/// allow; the pair takes 56.2 cycles, 28.1 a vertex (each path cut by hand
+/// from the disassembly of a build as `benches/kernel_mca.sh` makes it, its
+/// branches left out, and given to `llvm-mca -mcpu=icelake-server`). This
+/// Intel Xeon runs a 512-bit operation whole; on the AMD EPYC of the
+/// earlier rounds, which runs it as two halves, the same idea was slower
 /// (benches/ROUNDS.md, "Thirty-sixth round"). One thread, `RECYCLE=1
 /// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe -- passes
 /// FILE`, the emit pass's fastest and median of alternated runs: the dragon
 /// 9.08 / 9.36 → 8.42 / 8.75 ms (ten), the 5M scene 53.41 / 54.37 → 42.69 /
 /// 42.75 ms (three).
+///
+/// Where two vertices do not both have at most 4 listings, but both have at
+/// most 8 listings and 8 records, each vertex's records are first
+/// compressed into its half, and the pair then goes the same way. Against
+/// the pairs of at most 4 listings alone, the same command: the dragon 8.48
+/// / 8.52 → 8.22 / 8.34 and 8.60 / 8.77 → 8.26 / 8.53 ms (two runs of eight
+/// alternations), the 5M scene 42.14 / 42.16 against 42.21 / 42.31 ms
+/// (three). Every pair through the compresses, those of at most 4 listings
+/// too, was slower on the 5M scene (45.89 / 47.93 against 42.97 / 43.01
+/// ms).
 ///
 /// # Safety
 /// The CPU must have AVX-512F and AVX-512VL.
@@ -1594,6 +1604,72 @@ unsafe fn emit_range_avx512(
     let rank8x2 = _mm512_set_epi32(7, 6, 5, 4, 3, 2, 1, 0, 7, 6, 5, 4, 3, 2, 1, 0);
     let half = _mm512_set_epi32(8, 8, 8, 8, 8, 8, 8, 8, 0, 0, 0, 0, 0, 0, 0, 0);
     let second = _mm512_set_epi32(1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0);
+    // Writes two vertices' records and edges from their keys (`keys`,
+    // the first vertex's in the low half, records with keys `larger << 4
+    // | rank`, all ones elsewhere), their opposite vertices by rank in
+    // `swapped`'s halves, `k0` records of the first and `k` of both.
+    let finish2 =
+        |out: &mut KernelOut, keys: __m512i, swapped: __m512i, k0: usize, k: usize, v: usize| {
+            let sorted = sort8x2(keys);
+            // Each vertex's records in its half's first lanes (the
+            // rest all ones); the masks of both halves' records.
+            let kmask = (((1u32 << k0) - 1) | (((1u32 << (k - k0)) - 1) << 8)) as u16;
+            let larger = _mm512_srli_epi32::<4>(sorted);
+            let opposite = _mm512_permutexvar_epi32(
+                _mm512_or_si512(_mm512_and_si512(sorted, _mm512_set1_epi32(15)), half),
+                swapped,
+            );
+            // The key after each: the first half's last lane has none
+            // (not the second vertex's first key).
+            let next = _mm512_srli_epi32::<4>(_mm512_mask_mov_epi32(
+                _mm512_alignr_epi32::<1>(none, sorted),
+                0x0080,
+                none,
+            ));
+            let ends = _mm512_mask_cmpneq_epu32_mask(kmask, larger, next);
+            let edges = ends.count_ones() as usize;
+            let first_end = (out.base + out.records as u32 + 1) as i32;
+            let end = _mm512_add_epi32(
+                _mm512_set1_epi32(first_end),
+                _mm512_mask_add_epi32(rank8x2, 0xFF00, rank8x2, _mm512_set1_epi32(k0 as i32)),
+            );
+            let (a_at, b_at, end_at) = (
+                _mm512_maskz_compress_epi32(
+                    ends,
+                    _mm512_add_epi32(_mm512_set1_epi32(v as i32), second),
+                ),
+                _mm512_maskz_compress_epi32(ends, larger),
+                _mm512_maskz_compress_epi32(ends, end),
+            );
+            // SAFETY: as in `finish`, for 16 slots.
+            unsafe {
+                _mm512_mask_storeu_epi32(
+                    out.opp.add(out.records).cast(),
+                    ((1u32 << k) - 1) as u16,
+                    _mm512_maskz_compress_epi32(kmask, opposite),
+                );
+                let (a, b, e) = (
+                    out.a.add(out.edges),
+                    out.b.add(out.edges),
+                    out.end.add(out.edges),
+                );
+                if out.edges + 16 <= out.len {
+                    _mm512_storeu_si512(a.cast(), a_at);
+                    _mm512_storeu_si512(b.cast(), b_at);
+                    _mm512_storeu_si512(e.cast(), end_at);
+                } else {
+                    let emask = ((1u32 << edges) - 1) as u16;
+                    _mm512_mask_storeu_epi32(a.cast(), emask, a_at);
+                    _mm512_mask_storeu_epi32(b.cast(), emask, b_at);
+                    _mm512_mask_storeu_epi32(e.cast(), emask, end_at);
+                }
+                crate::hint::prefetch_stream(a);
+                crate::hint::prefetch_stream(b);
+                crate::hint::prefetch_stream(e);
+            }
+            out.records += k;
+            out.edges += edges;
+        };
     let mut spilled = 0;
     let mut kout = KernelOut::of(&mut group);
     let mut next_v = vertices.start;
@@ -1628,65 +1704,7 @@ unsafe fn emit_range_avx512(
                     none,
                     _mm512_or_si512(_mm512_slli_epi32::<4>(x), rank8x2),
                 );
-                let sorted = sort8x2(keys);
-                // Each vertex's records in its half's first lanes (the
-                // rest all ones); the masks of both halves' records.
-                let kmask = (((1u32 << k0) - 1) | (((1u32 << (k - k0)) - 1) << 8)) as u16;
-                let larger = _mm512_srli_epi32::<4>(sorted);
-                let opposite = _mm512_permutexvar_epi32(
-                    _mm512_or_si512(_mm512_and_si512(sorted, _mm512_set1_epi32(15)), half),
-                    swapped,
-                );
-                // The key after each: the first half's last lane has none
-                // (not the second vertex's first key).
-                let next = _mm512_srli_epi32::<4>(_mm512_mask_mov_epi32(
-                    _mm512_alignr_epi32::<1>(none, sorted),
-                    0x0080,
-                    none,
-                ));
-                let ends = _mm512_mask_cmpneq_epu32_mask(kmask, larger, next);
-                let edges = ends.count_ones() as usize;
-                let first_end = (out.base + out.records as u32 + 1) as i32;
-                let end = _mm512_add_epi32(
-                    _mm512_set1_epi32(first_end),
-                    _mm512_mask_add_epi32(rank8x2, 0xFF00, rank8x2, _mm512_set1_epi32(k0 as i32)),
-                );
-                let (a_at, b_at, end_at) = (
-                    _mm512_maskz_compress_epi32(
-                        ends,
-                        _mm512_add_epi32(_mm512_set1_epi32(v as i32), second),
-                    ),
-                    _mm512_maskz_compress_epi32(ends, larger),
-                    _mm512_maskz_compress_epi32(ends, end),
-                );
-                // SAFETY: as in `finish`, for 16 slots.
-                unsafe {
-                    _mm512_mask_storeu_epi32(
-                        out.opp.add(out.records).cast(),
-                        ((1u32 << k) - 1) as u16,
-                        _mm512_maskz_compress_epi32(kmask, opposite),
-                    );
-                    let (a, b, e) = (
-                        out.a.add(out.edges),
-                        out.b.add(out.edges),
-                        out.end.add(out.edges),
-                    );
-                    if out.edges + 16 <= out.len {
-                        _mm512_storeu_si512(a.cast(), a_at);
-                        _mm512_storeu_si512(b.cast(), b_at);
-                        _mm512_storeu_si512(e.cast(), end_at);
-                    } else {
-                        let emask = ((1u32 << edges) - 1) as u16;
-                        _mm512_mask_storeu_epi32(a.cast(), emask, a_at);
-                        _mm512_mask_storeu_epi32(b.cast(), emask, b_at);
-                        _mm512_mask_storeu_epi32(e.cast(), emask, end_at);
-                    }
-                    crate::hint::prefetch_stream(a);
-                    crate::hint::prefetch_stream(b);
-                    crate::hint::prefetch_stream(e);
-                }
-                out.records += k;
-                out.edges += edges;
+                finish2(out, keys, swapped, k0, k, v);
                 next_v += 1;
                 continue;
             }
@@ -1707,6 +1725,51 @@ unsafe fn emit_range_avx512(
             let records = (0x5555 & words) | (lower << 1);
             let k = records.count_ones() as usize;
             assert!(out.records + k <= out.len, "topology: records miscounted");
+            if k <= 8 && v + 1 < vertices.end {
+                let (_, l1) = listings.of(v + 1);
+                if l1 <= 8 {
+                    // SAFETY: the load reads the next vertex's 64 bytes
+                    // of slots, right after this one's.
+                    let x1 = unsafe {
+                        _mm512_loadu_si512(
+                            listings.pairs[from + SLOTS..from + 2 * SLOTS]
+                                .as_ptr()
+                                .cast(),
+                        )
+                    };
+                    let s1 = _mm512_ror_epi64::<32>(x1);
+                    let words1 = ((1u32 << (2 * l1)) - 1) as u16;
+                    let lower1 = _mm512_cmplt_epu32_mask(x1, s1) & 0x5555 & words1;
+                    let records1 = (0x5555 & words1) | (lower1 << 1);
+                    let k1 = records1.count_ones() as usize;
+                    if k1 <= 8 {
+                        assert!(
+                            out.records + k + k1 <= out.len,
+                            "topology: records miscounted"
+                        );
+                        let join = |a: __m512i, b: __m512i| {
+                            _mm512_inserti64x4::<1>(a, _mm512_castsi512_si256(b))
+                        };
+                        let words = join(
+                            _mm512_maskz_compress_epi32(records, x),
+                            _mm512_maskz_compress_epi32(records1, x1),
+                        );
+                        let opposite = join(
+                            _mm512_maskz_compress_epi32(records, swapped),
+                            _mm512_maskz_compress_epi32(records1, s1),
+                        );
+                        let kmask = (((1u32 << k) - 1) | (((1u32 << k1) - 1) << 8)) as u16;
+                        let keys = _mm512_mask_blend_epi32(
+                            kmask,
+                            none,
+                            _mm512_or_si512(_mm512_slli_epi32::<4>(words), rank8x2),
+                        );
+                        finish2(out, keys, opposite, k, k + k1, v);
+                        next_v += 1;
+                        continue;
+                    }
+                }
+            }
             if l <= 4 {
                 // At most 8 words: keys made in place, with the rank of
                 // each record its word's lane and the other lanes all
@@ -2583,6 +2646,48 @@ mod tests {
                     emit_alone(&tris, false),
                     "{l0} and {l1} listings"
                 );
+            }
+        }
+    }
+
+    /// The AVX-512 emit's other pairs, of two vertices of at most 8
+    /// listings and 8 records each (their records compressed into the
+    /// halves): vertex 1 with 5 or 6 listings (some of them as the middle
+    /// corner above vertex 0) after vertex 0 with at most 4, and every
+    /// mix up to 4 of each kind, give what the scalar emit gives; so does
+    /// a vertex 1 of 10 records, which is not paired. Caught: the second
+    /// vertex's records compressed by the first's mask, and the first
+    /// vertex's number of records taken for the second's.
+    #[test]
+    fn compressed_pairs_match_the_scalar_emit() {
+        if !simd_available() {
+            return;
+        }
+        for middle in 0..=4u32 {
+            for lower in 0..=4u32 {
+                for own in 0..=4 - middle {
+                    let mut tris = Vec::new();
+                    // Vertex 1 as the middle corner above 0 (a listing of
+                    // each), then as the smaller corner, both windings.
+                    for i in 0..middle {
+                        tris.extend_from_slice(&[0, 1, 20 + i]);
+                    }
+                    for j in 0..lower {
+                        match j % 2 {
+                            0 => tris.extend_from_slice(&[1, 9 - 2 * j, 30 + j]),
+                            _ => tris.extend_from_slice(&[30 + j, 9 - 2 * j, 1]),
+                        }
+                    }
+                    for i in 0..own {
+                        tris.extend_from_slice(&[0, 3 + 2 * i, 2 + 2 * i]);
+                    }
+                    tris.extend_from_slice(&[2, 12, 13]);
+                    assert_eq!(
+                        emit_alone(&tris, true),
+                        emit_alone(&tris, false),
+                        "{middle} middle, {lower} lower and {own} of vertex 0's own"
+                    );
+                }
             }
         }
     }
