@@ -1670,6 +1670,14 @@ unsafe fn emit_range_avx512(
             out.records += k;
             out.edges += edges;
         };
+    // The lanes of `x` (listings' words, `swapped` the same with each
+    // pair swapped) that are records, of those in `words`: word 2j is
+    // listing j's p (always a record's larger endpoint), word 2j + 1 its q
+    // (a record's where p < q); words outside `words` are not looked at.
+    let records_of = |x: __m512i, swapped: __m512i, words: u16| {
+        let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555 & words;
+        (0x5555 & words) | (lower << 1)
+    };
     let mut spilled = 0;
     let mut kout = KernelOut::of(&mut group);
     let mut next_v = vertices.start;
@@ -1694,8 +1702,7 @@ unsafe fn emit_range_avx512(
                 };
                 let swapped = _mm512_ror_epi64::<32>(x);
                 let words = (((1u32 << (2 * l)) - 1) | (((1u32 << (2 * l1)) - 1) << 8)) as u16;
-                let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555 & words;
-                let records = (0x5555 & words) | (lower << 1);
+                let records = records_of(x, swapped, words);
                 let k0 = (records as u8).count_ones() as usize;
                 let k = records.count_ones() as usize;
                 assert!(out.records + k <= out.len, "topology: records miscounted");
@@ -1717,12 +1724,7 @@ unsafe fn emit_range_avx512(
             // SAFETY: the load reads the 64 bytes of `slots`.
             let x = unsafe { _mm512_loadu_si512(slots.as_ptr().cast()) };
             let swapped = _mm512_ror_epi64::<32>(x);
-            // Word 2j is listing j's p (always a record's larger endpoint),
-            // word 2j + 1 its q (a record's where p < q); words past the
-            // last listing's are not looked at.
-            let words = ((1u32 << (2 * l)) - 1) as u16;
-            let lower = _mm512_cmplt_epu32_mask(x, swapped) & 0x5555 & words;
-            let records = (0x5555 & words) | (lower << 1);
+            let records = records_of(x, swapped, ((1u32 << (2 * l)) - 1) as u16);
             let k = records.count_ones() as usize;
             assert!(out.records + k <= out.len, "topology: records miscounted");
             if k <= 8 && v + 1 < vertices.end {
@@ -1738,9 +1740,7 @@ unsafe fn emit_range_avx512(
                         )
                     };
                     let s1 = _mm512_ror_epi64::<32>(x1);
-                    let words1 = ((1u32 << (2 * l1)) - 1) as u16;
-                    let lower1 = _mm512_cmplt_epu32_mask(x1, s1) & 0x5555 & words1;
-                    let records1 = (0x5555 & words1) | (lower1 << 1);
+                    let records1 = records_of(x1, s1, ((1u32 << (2 * l1)) - 1) as u16);
                     let k1 = records1.count_ones() as usize;
                     if k1 <= 8 {
                         assert!(
