@@ -267,10 +267,12 @@ fn build_edges_in<const TRI: bool>(
         u32::MAX / 3
     );
     let ranges = vertex_count.div_ceil(RANGE);
-    let per = tcount.div_ceil(chunks.max(1)).max(1);
-    let tri_chunks: Vec<&[u32]> = triangles.chunks(3 * per).collect();
+    // Each chunk is cut into `LIST_LANES` lanes of `per` triangles (the
+    // last fewer), each with its own counts and range heads.
+    let per = tcount.div_ceil(LIST_LANES * chunks.max(1)).max(1);
+    let lanes: Vec<&[u32]> = triangles.chunks(3 * per).collect();
 
-    // Pass 1: listings and records (half-edges) per (chunk, range).
+    // Pass 1: listings and records (half-edges) per (lane, range).
     // Fed, pass 1 also XORs a key of every edge of every triangle: an
     // edge on an even number of triangles cancels out, so a nonzero result
     // means some edge has an odd opposite count, 1 (open) most often. The
@@ -282,7 +284,7 @@ fn build_edges_in<const TRI: bool>(
     // guess is checked where the file is finished.
     let parity = consumer.is_some();
     let odd_edges = std::sync::atomic::AtomicU64::new(0);
-    let counts: Vec<Vec<u64>> = tri_chunks
+    let counts: Vec<Vec<u64>> = lanes
         .par_iter()
         .map(|tris| {
             let _part = crate::trace::span("topology: count (part)");
@@ -319,8 +321,8 @@ fn build_edges_in<const TRI: bool>(
             .spare_capacity_mut()
             .fill(MaybeUninit::new(UNWRITTEN));
     }
-    // Each chunk's next slot per range: the range's start, after the
-    // earlier chunks' listings in the range.
+    // Each lane's next slot per range: the range's start, after the
+    // earlier lanes' listings in the range.
     let mut heads: Vec<Vec<u32>> = Vec::with_capacity(counts.len());
     let mut next = list_start[..ranges].to_vec();
     for rr in &counts {
@@ -330,34 +332,44 @@ fn build_edges_in<const TRI: bool>(
         }
     }
     drop(counts);
+    // (Debug builds check below that each lane's heads end where the next
+    // lane's start, and the last lane's at the ranges' ends: that every
+    // lane listed exactly what pass 1 counted for it.)
+    let ends: Vec<Vec<u32>> = if cfg!(debug_assertions) {
+        heads.iter().skip(1).cloned().chain([next]).collect()
+    } else {
+        Vec::new()
+    };
     let (list_at, list_t_at) = (list.as_mut_ptr() as usize, list_t.as_mut_ptr() as usize);
-    tri_chunks
-        .par_iter()
-        .zip(heads.par_iter_mut())
+    lanes
+        .par_chunks(LIST_LANES)
+        .zip(heads.par_chunks_mut(LIST_LANES))
         .enumerate()
-        .for_each(|(ci, (tris, head))| {
+        .for_each(|(ci, (tris, heads))| {
             let _part = crate::trace::span("topology: list (part)");
-            let first_id = (ci * per) as u32;
-            // SAFETY: chunk `ci` owns, in each range r, the slots from
-            // `head[r]` on, as many as pass 1 counted for it; these are
-            // disjoint across chunks and ranges and lie inside `list` (and
-            // `list_t` when TRI), sized for `at` entries.
+            let first_id = (LIST_LANES * ci * per) as u32;
+            // SAFETY: lane `l` of chunk `ci` owns, in each range r, the
+            // slots from `heads[l][r]` on, as many as pass 1 counted for
+            // it; these are disjoint across lanes and ranges and lie
+            // inside `list` (and `list_t` when TRI), sized for `at`
+            // entries.
             unsafe {
                 match bits {
-                    Some(bits) => {
-                        list_ranges::<u64, TRI>(tris, first_id, head, bits, list_at, list_t_at)
-                    }
-                    None => {
-                        list_ranges::<[u32; 3], TRI>(tris, first_id, head, 0, list_at, list_t_at)
-                    }
+                    Some(bits) => list_ranges::<u64, TRI>(
+                        tris, heads, first_id, per, bits, list_at, list_t_at,
+                    ),
+                    None => list_ranges::<[u32; 3], TRI>(
+                        tris, heads, first_id, per, 0, list_at, list_t_at,
+                    ),
                 }
             }
         });
+    debug_assert!(heads == ends, "topology: a lane listed more or less than it counted");
     drop(heads);
     // Nothing reads the triangles after pass 2: owned ones are freed here,
     // before the edges' arrays are allocated
     // (`build_edges_opposites_only_owned`).
-    drop(tri_chunks);
+    drop(lanes);
     drop(input);
     // SAFETY: pass 1 counted every slot pass 2 writes, so all are written.
     unsafe {
@@ -654,19 +666,22 @@ impl Entry for [u32; 3] {
     }
 }
 
-/// Pass 2 of [`build_edges`] for one chunk of triangles, the first with id
-/// `first_id`: `[mid, hi]` under lo and `[hi, lo]` under mid, each
-/// appended to its vertex's range at `head` (and its triangle id to the
-/// same slot of the ids at `tri_at` when TRI).
+/// Pass 2 of [`build_edges`] for one chunk of triangles, cut into
+/// `lanes` of `per` triangles (the last fewer; the chunk's first id
+/// `first_id`): `[mid, hi]` under lo and `[hi, lo]` under mid, each
+/// appended to its vertex's range at its lane's `heads` (and its triangle
+/// id to the same slot of the ids at `tri_at` when TRI). A chunk of
+/// [`LIST_LANES`] lanes is listed a triangle of each lane in turn.
 ///
 /// # Safety
-/// The slots from `head[r]` on, as many as the chunk lists in range `r`,
-/// must lie in the listings at `list_at` (entries of type `E`) and the ids
-/// at `tri_at`, and be written by no one else.
+/// The slots from `heads[l][r]` on, as many as lane `l` lists in range
+/// `r`, must lie in the listings at `list_at` (entries of type `E`) and
+/// the ids at `tri_at`, and be written by no one else.
 unsafe fn list_ranges<E: Entry, const TRI: bool>(
-    tris: &[u32],
+    lanes: &[&[u32]],
+    heads: &mut [Vec<u32>],
     first_id: u32,
-    head: &mut [u32],
+    per: usize,
     bits: u32,
     list_at: usize,
     tri_at: usize,
@@ -679,9 +694,7 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
             out_t.add(s).write(id);
         }
     };
-    for (i, t) in tris.chunks_exact(3).enumerate() {
-        let id = first_id + i as u32;
-        crate::hint::prefetch_stream(tris.as_ptr().wrapping_add(3 * i));
+    let list = |t: &[u32], id: u32, head: &mut [u32]| {
         let (lo, mid, hi) = sort3(t);
         let (rl, rm) = ((lo >> RANGE_SHIFT) as usize, (mid >> RANGE_SHIFT) as usize);
         // (One update of the head for both listings where they fall in one
@@ -698,8 +711,57 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
         head[rm] += 1;
         crate::hint::prefetch_ptr(out.wrapping_add(s + LIST_AHEAD));
         put(s, E::new(mid, hi, lo, bits), id);
+    };
+    // The triangles all the lanes have, in step, with the lanes and heads
+    // as slices in locals (a store through a raw pointer may alias memory
+    // they are read from, which would then be read again after it); then
+    // the rest of each lane.
+    let mut done = 0;
+    if let (Ok(in_step), Ok(hs)) = (
+        <&[&[u32]; LIST_LANES]>::try_from(lanes),
+        <&mut [Vec<u32>; LIST_LANES]>::try_from(&mut *heads),
+    ) {
+        let (ts, hs) = (*in_step, hs.each_mut().map(|h| h.as_mut_slice()));
+        done = ts[LIST_LANES - 1].len() / 3;
+        for i in 0..done {
+            for l in 0..LIST_LANES {
+                crate::hint::prefetch_stream(ts[l].as_ptr().wrapping_add(3 * i));
+                list(
+                    &ts[l][3 * i..3 * i + 3],
+                    first_id + (l * per + i) as u32,
+                    hs[l],
+                );
+            }
+        }
+    }
+    for (l, (t, h)) in lanes.iter().zip(heads).enumerate() {
+        for (i, c) in t.chunks_exact(3).enumerate().skip(done) {
+            crate::hint::prefetch_stream(t.as_ptr().wrapping_add(3 * i));
+            list(c, first_id + (l * per + i) as u32, h);
+        }
     }
 }
+
+/// Lanes of a chunk of pass 2 ([`list_ranges`]): consecutive runs of its
+/// triangles, each with its own heads, listed a triangle of each in turn.
+///
+/// Why: each listing's head is loaded, incremented and stored, and the
+/// next listing in the same range (most: a triangle's two corners and
+/// consecutive triangles mostly fall in one range) loads it again, a
+/// chain through memory from listing to listing. Two lanes make two
+/// chains, each half as long. One thread, `RECYCLE=1 RAYON_NUM_THREADS=1
+/// cargo run --release --example stage_probe -- passes FILE`, the list
+/// pass, fastest / median, binaries alternated: the dragon 3.65 / 3.71 →
+/// 3.26 / 3.33 ms (eight), the 5M scene 21.88 / 21.89 → 19.85 / 20.36 ms
+/// (four); four lanes, in a first probe: the dragon as two, the 5M scene
+/// as one (each job keeps four times the streams of stores going). The
+/// same change (two chunks per thread, interleaved) was measured twice on
+/// the AMD EPYC (Zen 4) of the twenty-fifth to fiftieth rounds and
+/// dropped, 2–6% slower: the pass did not wait on the chain there. Our
+/// reading, not measured: Zen 2 and later forward a store to a load of
+/// the same address without its usual latency ("memory renaming"), and
+/// this Xeon's Ice Lake cores do not (benches/ROUNDS.md, Sixtieth round).
+const LIST_LANES: usize = 2;
 
 /// The listings pass 2 wrote, range after range, as pass 3 reads them.
 struct Buckets<'a> {
