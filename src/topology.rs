@@ -69,18 +69,21 @@ impl Edges {
 /// vertices in triangle order.
 ///
 /// 1. **Count** the listings and records per range of `RANGE` vertices
-///    (triangles cut into one chunk per thread, each with its own counts,
-///    in lanes: see the pass; 16 triangles at a time in AVX-512
-///    registers where pass 3's kernel runs, `count_avx512`).
+///    (triangles cut into one chunk per thread and each chunk into two
+///    parts, `CHUNK_PARTS`, each part with its own counts, in planes of
+///    counters: see the pass; 16 triangles at a time in AVX-512 registers
+///    where pass 3's kernel runs, `count_avx512`).
 /// 2. **List** every triangle under its `lo` and `mid` by the pair of its
 ///    other two corners: `[mid, hi]` under `lo`, `[hi, lo]` under `mid`
 ///    (2 listings per triangle; the pair's order tells the two kinds
 ///    apart), and with `opp_tri` also its id in a second list. A listing
 ///    is appended to its vertex's range, packed with the vertex's place in
 ///    the range into 8 bytes (`Entry`; 12 bytes over 2^25 vertices), so
-///    the pass writes one stream per range. Chunk `c` writes after chunks
-///    `0..c` in every range, so each vertex's listings are in triangle
-///    order whatever the number of chunks.
+///    the pass writes one stream per range. Part `l` writes after parts
+///    `0..l` in every range, so each vertex's listings are in triangle
+///    order whatever the number of chunks; a chunk's parts are listed a
+///    triangle of each in turn, two chains of updates to the ranges'
+///    heads (`CHUNK_PARTS`).
 ///
 ///    Why ranges and not each vertex's own list (the method until the
 ///    twenty-first round, with the counts per vertex): the lists are 16
@@ -267,12 +270,12 @@ fn build_edges_in<const TRI: bool>(
         u32::MAX / 3
     );
     let ranges = vertex_count.div_ceil(RANGE);
-    // Each chunk is cut into `LIST_LANES` lanes of `per` triangles (the
+    // Each chunk is cut into `CHUNK_PARTS` parts of `per` triangles (the
     // last fewer), each with its own counts and range heads.
-    let per = tcount.div_ceil(LIST_LANES * chunks.max(1)).max(1);
-    let lanes: Vec<&[u32]> = triangles.chunks(3 * per).collect();
+    let per = tcount.div_ceil(CHUNK_PARTS * chunks.max(1)).max(1);
+    let parts: Vec<&[u32]> = triangles.chunks(3 * per).collect();
 
-    // Pass 1: listings and records (half-edges) per (lane, range).
+    // Pass 1: listings and records (half-edges) per (part, range).
     // Fed, pass 1 also XORs a key of every edge of every triangle: an
     // edge on an even number of triangles cancels out, so a nonzero result
     // means some edge has an odd opposite count, 1 (open) most often. The
@@ -284,7 +287,7 @@ fn build_edges_in<const TRI: bool>(
     // guess is checked where the file is finished.
     let parity = consumer.is_some();
     let odd_edges = std::sync::atomic::AtomicU64::new(0);
-    let counts: Vec<Vec<u64>> = lanes
+    let counts: Vec<Vec<u64>> = parts
         .par_iter()
         .map(|tris| {
             let _part = crate::trace::span("topology: count (part)");
@@ -321,8 +324,8 @@ fn build_edges_in<const TRI: bool>(
             .spare_capacity_mut()
             .fill(MaybeUninit::new(UNWRITTEN));
     }
-    // Each lane's next slot per range: the range's start, after the
-    // earlier lanes' listings in the range.
+    // Each part's next slot per range: the range's start, after the
+    // earlier parts' listings in the range.
     let mut heads: Vec<Vec<u32>> = Vec::with_capacity(counts.len());
     let mut next = list_start[..ranges].to_vec();
     for rr in &counts {
@@ -332,25 +335,25 @@ fn build_edges_in<const TRI: bool>(
         }
     }
     drop(counts);
-    // (Debug builds check below that each lane's heads end where the next
-    // lane's start, and the last lane's at the ranges' ends: that every
-    // lane listed exactly what pass 1 counted for it.)
+    // (Debug builds check below that each part's heads end where the next
+    // part's start, and the last part's at the ranges' ends: that every
+    // part listed exactly what pass 1 counted for it.)
     let ends: Vec<Vec<u32>> = if cfg!(debug_assertions) {
         heads.iter().skip(1).cloned().chain([next]).collect()
     } else {
         Vec::new()
     };
     let (list_at, list_t_at) = (list.as_mut_ptr() as usize, list_t.as_mut_ptr() as usize);
-    lanes
-        .par_chunks(LIST_LANES)
-        .zip(heads.par_chunks_mut(LIST_LANES))
+    parts
+        .par_chunks(CHUNK_PARTS)
+        .zip(heads.par_chunks_mut(CHUNK_PARTS))
         .enumerate()
         .for_each(|(ci, (tris, heads))| {
             let _part = crate::trace::span("topology: list (part)");
-            let first_id = (LIST_LANES * ci * per) as u32;
-            // SAFETY: lane `l` of chunk `ci` owns, in each range r, the
+            let first_id = (CHUNK_PARTS * ci * per) as u32;
+            // SAFETY: part `l` of chunk `ci` owns, in each range r, the
             // slots from `heads[l][r]` on, as many as pass 1 counted for
-            // it; these are disjoint across lanes and ranges and lie
+            // it; these are disjoint across parts and ranges and lie
             // inside `list` (and `list_t` when TRI), sized for `at`
             // entries.
             unsafe {
@@ -364,12 +367,15 @@ fn build_edges_in<const TRI: bool>(
                 }
             }
         });
-    debug_assert!(heads == ends, "topology: a lane listed more or less than it counted");
+    debug_assert!(
+        heads == ends,
+        "topology: a part listed more or less than it counted"
+    );
     drop(heads);
     // Nothing reads the triangles after pass 2: owned ones are freed here,
     // before the edges' arrays are allocated
     // (`build_edges_opposites_only_owned`).
-    drop(lanes);
+    drop(parts);
     drop(input);
     // SAFETY: pass 1 counted every slot pass 2 writes, so all are written.
     unsafe {
@@ -667,18 +673,18 @@ impl Entry for [u32; 3] {
 }
 
 /// Pass 2 of [`build_edges`] for one chunk of triangles, cut into
-/// `lanes` of `per` triangles (the last fewer; the chunk's first id
+/// `parts` of `per` triangles (the last fewer; the chunk's first id
 /// `first_id`): `[mid, hi]` under lo and `[hi, lo]` under mid, each
-/// appended to its vertex's range at its lane's `heads` (and its triangle
+/// appended to its vertex's range at its part's `heads` (and its triangle
 /// id to the same slot of the ids at `tri_at` when TRI). A chunk of
-/// [`LIST_LANES`] lanes is listed a triangle of each lane in turn.
+/// [`CHUNK_PARTS`] parts is listed a triangle of each part in turn.
 ///
 /// # Safety
-/// The slots from `heads[l][r]` on, as many as lane `l` lists in range
+/// The slots from `heads[l][r]` on, as many as part `l` lists in range
 /// `r`, must lie in the listings at `list_at` (entries of type `E`) and
 /// the ids at `tri_at`, and be written by no one else.
 unsafe fn list_ranges<E: Entry, const TRI: bool>(
-    lanes: &[&[u32]],
+    parts: &[&[u32]],
     heads: &mut [Vec<u32>],
     first_id: u32,
     per: usize,
@@ -712,19 +718,19 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
         crate::hint::prefetch_ptr(out.wrapping_add(s + LIST_AHEAD));
         put(s, E::new(mid, hi, lo, bits), id);
     };
-    // The triangles all the lanes have, in step, with the lanes and heads
+    // The triangles all the parts have, in step, with the parts and heads
     // as slices in locals (a store through a raw pointer may alias memory
     // they are read from, which would then be read again after it); then
-    // the rest of each lane.
+    // the rest of each part.
     let mut done = 0;
     if let (Ok(in_step), Ok(hs)) = (
-        <&[&[u32]; LIST_LANES]>::try_from(lanes),
-        <&mut [Vec<u32>; LIST_LANES]>::try_from(&mut *heads),
+        <&[&[u32]; CHUNK_PARTS]>::try_from(parts),
+        <&mut [Vec<u32>; CHUNK_PARTS]>::try_from(&mut *heads),
     ) {
         let (ts, hs) = (*in_step, hs.each_mut().map(|h| h.as_mut_slice()));
-        done = ts[LIST_LANES - 1].len() / 3;
+        done = ts[CHUNK_PARTS - 1].len() / 3;
         for i in 0..done {
-            for l in 0..LIST_LANES {
+            for l in 0..CHUNK_PARTS {
                 crate::hint::prefetch_stream(ts[l].as_ptr().wrapping_add(3 * i));
                 list(
                     &ts[l][3 * i..3 * i + 3],
@@ -734,7 +740,7 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
             }
         }
     }
-    for (l, (t, h)) in lanes.iter().zip(heads).enumerate() {
+    for (l, (t, h)) in parts.iter().zip(heads).enumerate() {
         for (i, c) in t.chunks_exact(3).enumerate().skip(done) {
             crate::hint::prefetch_stream(t.as_ptr().wrapping_add(3 * i));
             list(c, first_id + (l * per + i) as u32, h);
@@ -742,18 +748,19 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
     }
 }
 
-/// Lanes of a chunk of pass 2 ([`list_ranges`]): consecutive runs of its
-/// triangles, each with its own heads, listed a triangle of each in turn.
+/// Parts of each chunk of passes 1 and 2: consecutive runs of its
+/// triangles, each with its own counts and range heads; pass 2
+/// ([`list_ranges`]) lists a triangle of each part in turn.
 ///
 /// Why: each listing's head is loaded, incremented and stored, and the
 /// next listing in the same range (most: a triangle's two corners and
 /// consecutive triangles mostly fall in one range) loads it again, a
-/// chain through memory from listing to listing. Two lanes make two
+/// chain through memory from listing to listing. Two parts make two
 /// chains, each half as long. One thread, `RECYCLE=1 RAYON_NUM_THREADS=1
 /// cargo run --release --example stage_probe -- passes FILE`, the list
 /// pass, fastest / median, binaries alternated: the dragon 3.65 / 3.71 →
 /// 3.26 / 3.33 ms (eight), the 5M scene 21.88 / 21.89 → 19.85 / 20.36 ms
-/// (four); four lanes, in a first probe: the dragon as two, the 5M scene
+/// (four); four parts, in a first probe: the dragon as two, the 5M scene
 /// as one (each job keeps four times the streams of stores going). The
 /// same change (two chunks per thread, interleaved) was measured twice on
 /// the AMD EPYC (Zen 4) of the twenty-fifth to fiftieth rounds and
@@ -761,7 +768,7 @@ unsafe fn list_ranges<E: Entry, const TRI: bool>(
 /// reading, not measured: Zen 2 and later forward a store to a load of
 /// the same address without its usual latency ("memory renaming"), and
 /// this Xeon's Ice Lake cores do not (benches/ROUNDS.md, Sixtieth round).
-const LIST_LANES: usize = 2;
+const CHUNK_PARTS: usize = 2;
 
 /// The listings pass 2 wrote, range after range, as pass 3 reads them.
 struct Buckets<'a> {
