@@ -337,9 +337,11 @@ fn build_edges_in<const TRI: bool>(
     drop(counts);
     // (Debug builds check below that each part's heads end where the next
     // part's start, and the last part's at the ranges' ends: that every
-    // part listed exactly what pass 1 counted for it.)
+    // part listed exactly what pass 1 counted for it. No triangles, no
+    // parts.)
     let ends: Vec<Vec<u32>> = if cfg!(debug_assertions) {
-        heads.iter().skip(1).cloned().chain([next]).collect()
+        let last = (!heads.is_empty()).then_some(next);
+        heads.iter().skip(1).cloned().chain(last).collect()
     } else {
         Vec::new()
     };
@@ -2391,6 +2393,18 @@ mod tests {
         let mut sorted = keys.clone();
         sorted.sort();
         assert_eq!(keys, sorted);
+    }
+
+    /// No triangles: no edges, over no vertices or some, from every entry
+    /// point (and no part for pass 2's check in debug builds).
+    #[test]
+    fn no_triangles_make_no_edges() {
+        for vertices in [0, 5] {
+            let e = build_edges(&[], vertices);
+            assert_eq!((e.len(), e.opp.len(), e.opp_start.len()), (0, 0, 1));
+            let e = build_edges_opposites_only(&[], vertices);
+            assert_eq!((e.len(), e.opp.len()), (0, 0));
+        }
     }
 
     /// The obvious implementation: a sorted map from (smaller, larger)
