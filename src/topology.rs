@@ -18,6 +18,9 @@
 use std::borrow::Cow;
 use std::mem::MaybeUninit;
 
+#[cfg(target_arch = "x86_64")]
+mod emit_avx2;
+
 /// Edges in compressed-row form.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Edges {
@@ -144,7 +147,7 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
             triangles.into(),
             vertex_count,
             chunks_for(triangles),
-            false,
+            Simd::Plain,
             false,
             None,
         )
@@ -216,7 +219,7 @@ fn opposites_only(
             triangles,
             vertex_count,
             chunks,
-            simd_available(),
+            simd_level(),
             false,
             consumer,
         )
@@ -247,14 +250,14 @@ fn chunks_for(triangles: &[u32]) -> usize {
 
 /// [`build_edges`] (with `opp_tri` when `TRI`) with the triangles cut into
 /// `chunks` chunks for the count and list passes (tests use it to vary the
-/// cut), pass 3's AVX-512 kernel when `simd` (the CPU must have it; tests
-/// run both), and the passes' times. The public entry points run it as one
+/// cut), the kernels `simd` names (the CPU must have them; tests run
+/// each), and the passes' times. The public entry points run it as one
 /// job on rayon's pool (see `crate::pool`).
 fn build_edges_in<const TRI: bool>(
     input: Cow<'_, [u32]>,
     vertex_count: usize,
     chunks: usize,
-    simd: bool,
+    simd: Simd,
     wide: bool,
     consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
 ) -> (Edges, PassTimes) {
@@ -291,7 +294,7 @@ fn build_edges_in<const TRI: bool>(
         .par_iter()
         .map(|tris| {
             let _part = crate::trace::span("topology: count (part)");
-            let (count, odd) = count_chunk(tris, ranges, simd, parity);
+            let (count, odd) = count_chunk(tris, ranges, simd == Simd::Avx512, parity);
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
             count
         })
@@ -488,6 +491,7 @@ fn build_edges_in<const TRI: bool>(
                         b: ob,
                         end: os,
                         base: rec_start[group_start[g]] as u32,
+                        room: 0,
                         records: 0,
                         edges: 0,
                     };
@@ -1088,7 +1092,7 @@ fn emit_fed(
     n: usize,
     buckets: &Buckets,
     vertex_count: usize,
-    simd: bool,
+    simd: Simd,
     consumer: &mut (dyn FnMut(&EmitFeed) + Send),
 ) -> usize {
     use std::sync::atomic::Ordering::Release;
@@ -1146,6 +1150,7 @@ fn emit_fed(
                     b: std::slice::from_raw_parts_mut(b.add(edges), n - edges),
                     end: std::slice::from_raw_parts_mut(s.add(1 + edges), n - edges),
                     base: records as u32,
+                    room: 0,
                     records: 0,
                     edges: 0,
                 }
@@ -1177,6 +1182,10 @@ struct GroupOut<'a> {
     end: &'a mut [MaybeUninit<u32>],
     /// Position in `opp` of the group's first record.
     base: u32,
+    /// How many u32 from `opp` on may be written: its records', and past
+    /// them the listings already read (`emit_avx2` writes whole registers
+    /// there). Set per range by [`emit_ranges`].
+    room: usize,
     /// Records written.
     records: usize,
     /// Edges written.
@@ -1240,7 +1249,7 @@ fn emit_ranges<const TRI: bool>(
     buckets: &Buckets,
     vertices: std::ops::Range<usize>,
     scratch: &mut Scratch,
-    simd: bool,
+    simd: Simd,
 ) -> (usize, usize) {
     let GroupOut {
         opp,
@@ -1258,20 +1267,28 @@ fn emit_ranges<const TRI: bool>(
         let r = v >> RANGE_SHIFT;
         let n = next - v;
         match (buckets.bits, simd) {
-            // SAFETY: `simd` is set only where the CPU has BMI2
-            // (`simd_available`).
+            // SAFETY: `Simd::Avx512` is set only where the CPU has BMI2
+            // (`simd_level`).
             #[cfg(target_arch = "x86_64")]
-            (Some(_), true) => unsafe { sort_range_bmi2::<u64, TRI>(buckets, r, n, scratch) },
+            (Some(_), Simd::Avx512) => unsafe {
+                sort_range_bmi2::<u64, TRI>(buckets, r, n, scratch)
+            },
             (Some(_), _) => sort_range::<u64, TRI, false>(buckets, r, n, scratch),
             (None, _) => sort_range::<[u32; 3], TRI, false>(buckets, r, n, scratch),
         }
+        // Records may go as far as the listings read, which end with this
+        // range's (a listing gives at most 2 records, and takes 2 or 3 u32).
+        let words = std::mem::size_of::<u32>() * if buckets.bits.is_some() { 2 } else { 3 };
+        let read = buckets.at + words * buckets.start[r + 1] as usize;
+        let o_opp = opp.wrapping_add(records);
         let o = GroupOut {
-            opp: opp.wrapping_add(records),
+            opp: o_opp,
             tri: if TRI { &mut tri[records..] } else { &mut [] },
             a: &mut a[edges..],
             b: &mut b[edges..],
             end: &mut end[edges..],
             base: base + records as u32,
+            room: (read - o_opp as usize) / std::mem::size_of::<u32>(),
             records: 0,
             edges: 0,
         };
@@ -1291,8 +1308,8 @@ fn emit_ranges<const TRI: bool>(
     (records, edges)
 }
 
-/// Pass 3 of [`build_edges`] for a group's `vertices`, with the AVX-512
-/// kernel when `simd` (never with `opp_tri`, which `lint` alone asks for);
+/// Pass 3 of [`build_edges`] for a group's `vertices`, with the kernel
+/// `simd` names (never with `opp_tri`, which `lint` alone asks for);
 /// returns the numbers of records and edges written.
 #[inline(always)]
 fn emit_group<const TRI: bool>(
@@ -1300,13 +1317,20 @@ fn emit_group<const TRI: bool>(
     listings: &Listings,
     vertices: std::ops::Range<usize>,
     buf: &mut EmitBuf,
-    simd: bool,
+    simd: Simd,
 ) -> (usize, usize) {
     #[cfg(target_arch = "x86_64")]
-    if !TRI && simd && listings.narrow {
-        // SAFETY: `simd` is set only where the CPU has AVX-512F and
-        // AVX-512VL (`simd_available`).
-        return unsafe { emit_range_avx512(out, listings, vertices, buf) };
+    if !TRI && listings.narrow {
+        match simd {
+            // SAFETY: `Simd::Avx512` is set only where the CPU has
+            // AVX-512F and AVX-512VL, `Simd::Avx2` only where it has AVX2
+            // and POPCNT (`simd_level`).
+            Simd::Avx512 => return unsafe { emit_range_avx512(out, listings, vertices, buf) },
+            Simd::Avx2 => {
+                return unsafe { emit_avx2::emit_range_avx2(out, listings, vertices, buf) };
+            }
+            Simd::Plain => {}
+        }
     }
     let _ = simd;
     emit_range::<TRI>(out, listings, vertices, buf)
@@ -1354,23 +1378,37 @@ fn emit_range<const TRI: bool>(
     (out.records, out.edges)
 }
 
-/// Whether pass 3 may run its AVX-512 kernel and `sort_range_bmi2`, and
-/// pass 1 `count_avx512`: the CPU has AVX-512F, AVX-512VL, AVX-512DQ and
-/// BMI2 (run-time check) and
+/// Which kernels the topology's passes run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Simd {
+    /// The scalar loops.
+    Plain,
+    /// Pass 3's AVX2 kernel (`emit_avx2`), the scalar loops elsewhere.
+    Avx2,
+    /// Pass 3's AVX-512 kernel and `sort_range_bmi2`, and pass 1's
+    /// `count_avx512`.
+    Avx512,
+}
+
+/// The fastest [`Simd`] this CPU runs (run-time checks): `Avx512` where it
+/// has AVX-512F, AVX-512VL, AVX-512DQ and BMI2 and
 /// `evaluate_simd::disable_avx512` has not turned the crate's AVX-512
-/// kernels off.
-fn simd_available() -> bool {
+/// kernels off, else `Avx2` where it has AVX2 and POPCNT, else `Plain`.
+fn simd_level() -> Simd {
     #[cfg(target_arch = "x86_64")]
     {
-        crate::evaluate_simd::have_avx512()
+        if crate::evaluate_simd::have_avx512()
             && std::arch::is_x86_feature_detected!("avx512vl")
             && std::arch::is_x86_feature_detected!("avx512dq")
             && std::arch::is_x86_feature_detected!("bmi2")
+        {
+            return Simd::Avx512;
+        }
+        if crate::evaluate_simd::have_avx2() && std::arch::is_x86_feature_detected!("popcnt") {
+            return Simd::Avx2;
+        }
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    Simd::Plain
 }
 
 /// Pass 3 for vertex `v`, whose listings `listed` start at `from`: its
@@ -1940,6 +1978,8 @@ struct KernelOut {
     len: usize,
     /// [`GroupOut::base`].
     base: u32,
+    /// [`GroupOut::room`].
+    room: usize,
     /// [`GroupOut::records`], handed back before anything else writes.
     records: usize,
     /// [`GroupOut::edges`], the same.
@@ -1958,6 +1998,7 @@ impl KernelOut {
             end: out.end.as_mut_ptr(),
             len: out.a.len(),
             base: out.base,
+            room: out.room,
             records: out.records,
             edges: out.edges,
         }
@@ -2484,7 +2525,7 @@ mod tests {
         // (a soup with each triangle twice still gives 0 then), and each
         // block's adds read from the block's own slot instead of the one
         // before.
-        if !simd_available() {
+        if simd_level() != Simd::Avx512 {
             return;
         }
         for (vertices, triangles, seed) in [
@@ -2563,11 +2604,19 @@ mod tests {
         // 12 bytes.
         for (chunks, wide) in (1..=5).flat_map(|c| [(c, false), (c, true)]) {
             same_edges(
-                &build_edges_in::<true>((&tris[..]).into(), vertices, chunks, false, wide, None).0,
+                &build_edges_in::<true>(
+                    (&tris[..]).into(),
+                    vertices,
+                    chunks,
+                    Simd::Plain,
+                    wide,
+                    None,
+                )
+                .0,
                 &expected,
                 &format!("{chunks} chunks, wide {wide}"),
             );
-            for simd in [false, simd_available()] {
+            for simd in simd_levels() {
                 same_edges(
                     &build_edges_in::<false>(
                         (&tris[..]).into(),
@@ -2579,7 +2628,7 @@ mod tests {
                     )
                     .0,
                     &without_tri,
-                    &format!("{chunks} chunks, opposites only, simd {simd}, wide {wide}"),
+                    &format!("{chunks} chunks, opposites only, {simd:?}, wide {wide}"),
                 );
             }
         }
@@ -2612,15 +2661,33 @@ mod tests {
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(build_edges_opposites_only(&[], 5), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>((&tris[..3]).into(), vertices, 4, false, false, None).0,
+            build_edges_in::<true>((&tris[..3]).into(), vertices, 4, Simd::Plain, false, None).0,
             naive(&tris[..3])
         );
     }
 
-    /// Pass 3 on triangles over the given vertex ids alone, by the AVX-512
-    /// kernel when `simd`, else by the scalar emit: the opposite vertices
-    /// and the edges (a, b, end of its opposite vertices) it writes.
-    fn emit_alone(tris: &[u32], simd: bool) -> (Vec<u32>, Vec<[u32; 3]>) {
+    /// Every [`Simd`] this CPU runs, `Plain` first.
+    fn simd_levels() -> Vec<Simd> {
+        let mut levels = vec![Simd::Plain];
+        #[cfg(target_arch = "x86_64")]
+        if crate::evaluate_simd::have_avx2() && std::arch::is_x86_feature_detected!("popcnt") {
+            levels.push(Simd::Avx2);
+        }
+        if simd_level() == Simd::Avx512 {
+            levels.push(Simd::Avx512);
+        }
+        levels
+    }
+
+    /// The emit kernels this CPU runs (every [`Simd`] but `Plain`).
+    fn kernels() -> Vec<Simd> {
+        simd_levels().split_off(1)
+    }
+
+    /// Pass 3 on triangles over the given vertex ids alone, by the kernel
+    /// `simd` names (`Plain`: the scalar emit): the opposite vertices and
+    /// the edges (a, b, end of its opposite vertices) it writes.
+    fn emit_alone(tris: &[u32], simd: Simd) -> (Vec<u32>, Vec<[u32; 3]>) {
         let ids = tris.iter().copied();
         let (first, last) = (ids.clone().min().unwrap(), ids.max().unwrap());
         let mut under = vec![Vec::new(); (last - first + 1) as usize];
@@ -2647,7 +2714,8 @@ mod tests {
             }
         }
         let n = tris.len(); // (3 records per triangle at most)
-        let mut opp = vec![UNWRITTEN; n];
+        // (With a guard of 8 slots past the room the emit is given.)
+        let mut opp = vec![UNWRITTEN; n + 8];
         let mut arrays = vec![vec![MaybeUninit::new(UNWRITTEN); n]; 3];
         let [a, b, end] = &mut arrays[..] else {
             unreachable!()
@@ -2659,6 +2727,9 @@ mod tests {
             b,
             end,
             base: 0,
+            // No room past the records (exactly 3 per triangle): the
+            // kernels' stores near the end must stop at them.
+            room: n,
             records: 0,
             edges: 0,
         };
@@ -2672,17 +2743,11 @@ mod tests {
         };
         let mut buf = EmitBuf::default();
         let vertices = first as usize..last as usize + 1;
-        let (records, edges) = if simd {
-            // SAFETY: the caller checked `simd_available`.
-            #[cfg(target_arch = "x86_64")]
-            unsafe {
-                emit_range_avx512(out, &listings, vertices, &mut buf)
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            unreachable!()
-        } else {
-            emit_range::<false>(out, &listings, vertices, &mut buf)
-        };
+        let (records, edges) = emit_group::<false>(out, &listings, vertices, &mut buf, simd);
+        assert!(
+            opp[n..].iter().all(|&o| o == UNWRITTEN),
+            "{simd:?}: a store past the room"
+        );
         opp.truncate(records);
         // SAFETY: the emit wrote the first `edges` slots of each.
         let edge = |i: usize| std::array::from_fn(|x| unsafe { arrays[x][i].assume_init() });
@@ -2697,15 +2762,14 @@ mod tests {
     /// (with 8 records, its last edge then ran on into the next vertex's).
     #[test]
     fn paired_vertices_end_their_own_edges() {
-        if !simd_available() {
-            return;
-        }
         // Vertex 0 is the smallest corner of 4 triangles (8 records, the
         // last on vertex 9); vertex 1 of one, on 9 and 10.
         let tris = [0, 2, 3, 0, 4, 5, 0, 6, 7, 0, 8, 9, 1, 9, 10];
-        let (opp, edges) = emit_alone(&tris, true);
-        assert_eq!(edges.iter().filter(|e| e[0] == 0).count(), 8);
-        assert_eq!((opp, edges), emit_alone(&tris, false));
+        for simd in kernels() {
+            let (opp, edges) = emit_alone(&tris, simd);
+            assert_eq!(edges.iter().filter(|e| e[0] == 0).count(), 8, "{simd:?}");
+            assert_eq!((opp, edges), emit_alone(&tris, Simd::Plain), "{simd:?}");
+        }
     }
 
     /// The AVX-512 emit's pairs of vertices 0 and 1 give what the scalar
@@ -2721,10 +2785,10 @@ mod tests {
     /// second vertex's ranks into the first vertex's opposite vertices.
     #[test]
     fn compressed_pairs_match_the_scalar_emit() {
-        if !simd_available() {
-            return;
-        }
-        for middle in 0..=4u32 {
+        for (simd, middle) in kernels()
+            .into_iter()
+            .flat_map(|k| (0..=4u32).map(move |m| (k, m)))
+        {
             for lower in 0..=4u32 {
                 for own in 0..=4 - middle {
                     let mut tris = Vec::new();
@@ -2744,9 +2808,9 @@ mod tests {
                     }
                     tris.extend_from_slice(&[2, 12, 13]);
                     assert_eq!(
-                        emit_alone(&tris, true),
-                        emit_alone(&tris, false),
-                        "{middle} middle, {lower} lower and {own} of vertex 0's own"
+                        emit_alone(&tris, simd),
+                        emit_alone(&tris, Simd::Plain),
+                        "{simd:?}: {middle} middle, {lower} lower and {own} of vertex 0's own"
                     );
                 }
             }
@@ -2761,9 +2825,6 @@ mod tests {
     /// comparison below `KEY_IDS − 1` then fails).
     #[test]
     fn the_simd_emit_keys_hold_every_id_below_the_bound() {
-        if !simd_available() {
-            return;
-        }
         let fans = |top: u32| {
             let mut tris = Vec::new();
             for i in 0..7u32 {
@@ -2790,9 +2851,13 @@ mod tests {
             .take(40)
             .map(|v| records(v).sum::<u32>());
         assert!((9..=16).contains(&most.max().unwrap()));
-        assert_eq!(emit_alone(&tris, true), emit_alone(&tris, false));
-        let tris = fans(KEY_IDS as u32 - 1);
-        assert_ne!(emit_alone(&tris, true), emit_alone(&tris, false));
+        let beyond = fans(KEY_IDS as u32 - 1);
+        for simd in kernels() {
+            let plain = emit_alone(&tris, Simd::Plain);
+            assert_eq!(emit_alone(&tris, simd), plain, "{simd:?}");
+            let plain = emit_alone(&beyond, Simd::Plain);
+            assert_ne!(emit_alone(&beyond, simd), plain, "{simd:?}");
+        }
         assert!(!Buckets::narrow_for(KEY_IDS) && Buckets::narrow_for(KEY_IDS - 1));
     }
 
