@@ -213,10 +213,10 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
             )
         })
     });
-    // The same without pass 3's AVX-512 kernel (the scalar emit every
-    // build ran before the thirteenth round, and runs where the CPU lacks
-    // AVX-512).
-    g.bench_function(format!("opposites_only_scalar/{n}"), |b| {
+    // The same without the AVX-512 kernels: pass 3's AVX2 kernel (since
+    // the sixty-first round), which runs where the CPU has AVX2 but not
+    // AVX-512.
+    g.bench_function(format!("opposites_only_avx2/{n}"), |b| {
         svpack::evaluate_simd::disable_avx512(true);
         b.iter(|| {
             topology::build_edges_opposites_only(
@@ -225,6 +225,18 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
             )
         });
         svpack::evaluate_simd::disable_avx512(false);
+    });
+    // The same without any kernel: the scalar passes (the emit every build
+    // ran before the thirteenth round, and runs where the CPU lacks AVX2).
+    g.bench_function(format!("opposites_only_scalar/{n}"), |b| {
+        topology::scalar_topology(true);
+        b.iter(|| {
+            topology::build_edges_opposites_only(
+                black_box(&m.welded.triangles),
+                m.welded.positions.len(),
+            )
+        });
+        topology::scalar_topology(false);
     });
     g.bench_function(format!("previous_sort/{n}"), |b| {
         b.iter(|| {

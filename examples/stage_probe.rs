@@ -38,12 +38,14 @@
 //! without them (slower by about 2 ms: `file_write` took 21.2–21.4 ms
 //! for 128 MiB without, 18.9–19.5 ms with, twelfth round).
 //!
-//! Three environment variables, for every step: `RECYCLE=1` holds an
+//! Four environment variables, for every step: `RECYCLE=1` holds an
 //! `alloc::KeepFreed` guard, so that each run reuses the blocks the one
 //! before freed instead of faulting in fresh pages, whose cost on this
 //! machine varies more than the code's; `NO_AVX512=1` turns the crate's
 //! AVX-512 kernels off (`evaluate_simd::disable_avx512`), which times the
-//! scalar topology pass on the same binary; `NO_THP=1` (Linux) turns
+//! topology's AVX2 emit (the scalar one without AVX2) on the same binary;
+//! `SCALAR_TOPOLOGY=1` turns every topology kernel off
+//! (`topology::scalar_topology`), which times its scalar passes; `NO_THP=1` (Linux) turns
 //! transparent huge pages off for the process (`PR_SET_THP_DISABLE`), so
 //! that every block is in 4 KiB pages, which tells what the TLB's misses
 //! cost a step (fifty-second round, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo
@@ -87,6 +89,9 @@ fn main() {
     let _keep = std::env::var_os("RECYCLE").map(|_| svpack::alloc::KeepFreed::new());
     if std::env::var_os("NO_AVX512").is_some() {
         svpack::evaluate_simd::disable_avx512(true);
+    }
+    if std::env::var_os("SCALAR_TOPOLOGY").is_some() {
+        svpack::topology::scalar_topology(true);
     }
     #[cfg(target_os = "linux")]
     if std::env::var_os("NO_THP").is_some() {

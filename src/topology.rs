@@ -1390,11 +1390,26 @@ enum Simd {
     Avx512,
 }
 
-/// The fastest [`Simd`] this CPU runs (run-time checks): `Avx512` where it
-/// has AVX-512F, AVX-512VL, AVX-512DQ and BMI2 and
-/// `evaluate_simd::disable_avx512` has not turned the crate's AVX-512
-/// kernels off, else `Avx2` where it has AVX2 and POPCNT, else `Plain`.
+/// Set by [`scalar_topology`].
+static SCALAR: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Makes the topology run its scalar passes, none of its AVX2 or AVX-512
+/// kernels, until called again with `false`. For benchmarks, which time
+/// both in one run; the edges are the same either way.
+#[doc(hidden)]
+pub fn scalar_topology(on: bool) {
+    SCALAR.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The fastest [`Simd`] this CPU runs (run-time checks), `Plain` when
+/// [`scalar_topology`] asks for it: `Avx512` where it has AVX-512F,
+/// AVX-512VL, AVX-512DQ and BMI2 and `evaluate_simd::disable_avx512` has
+/// not turned the crate's AVX-512 kernels off, else `Avx2` where it has
+/// AVX2 and POPCNT, else `Plain`.
 fn simd_level() -> Simd {
+    if SCALAR.load(std::sync::atomic::Ordering::Relaxed) {
+        return Simd::Plain;
+    }
     #[cfg(target_arch = "x86_64")]
     {
         if crate::evaluate_simd::have_avx512()

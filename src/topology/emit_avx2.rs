@@ -4,13 +4,19 @@
 //!
 //! Why: without AVX-512 the emit ran the scalar [`super::emit_vertex`],
 //! which moves every record through memory, sorts them by a network of 19
-//! dependent scalar compare-exchanges and writes them one at a time. On an
-//! AMD EPYC of the Zen 3 generation (no AVX-512) the scalar emit took 22.4
-//! ms of the dragon's 28.9 ms topology, one thread, where the AVX-512
-//! kernel takes 8.4 ms on this project's Intel Xeon (`RECYCLE=1
-//! RAYON_NUM_THREADS=1 cargo run --release --example stage_probe -- passes
-//! target/dragon/dragon.glb`; the figures of this kernel are in
-//! benches/ROUNDS.md, "Sixty-first round").
+//! dependent scalar compare-exchanges and writes them one at a time. On the
+//! AMD EPYC of the sixty-first round (Zen 3, no AVX-512) that took 22.4 ms
+//! of the dragon's 28.6 ms topology, one thread, where the AVX-512 kernel
+//! took 8.4 ms on the Intel Xeon of the rounds before. With this kernel,
+//! one thread, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release --example
+//! stage_probe -- passes FILE`, binaries alternated, fastest / median: the
+//! emit pass 22.36 / 22.50 → 11.64 / 11.71 ms on the dragon (eight), 111.97
+//! / 117.86 → 60.56 / 63.12 ms on the 5M scene (four); `SCALAR_TOPOLOGY=1`
+//! times the scalar passes on the same binary. Tried on that machine and
+//! dropped (benches/ROUNDS.md, "Sixty-first round"): every vertex of at
+//! most 8 listings through two registers (no branch on 4 listings:
+//! slower), two vertices of at most 4 listings at once (the same time),
+//! the table as whole registers (the same), `sort_range_bmi2` (the same).
 
 use super::{EmitBuf, GroupOut, KernelOut, Listings, SLOTS, emit_vertex};
 use std::arch::x86_64::*;
@@ -181,8 +187,15 @@ unsafe fn finish(
     );
     // SAFETY: records `records..records + k` are the group's (the
     // caller's contract), and edges never outnumber records; the whole
-    // stores write 8 slots from `edges` only inside `a`, `b` and `end`,
-    // which are equally long (as in `emit_range_avx512`).
+    // stores write 8 slots from `records` only inside the room (listings
+    // already read), from `edges` only inside `a`, `b` and `end`, which are
+    // equally long (as in `emit_range_avx512`).
+    //
+    // Whole stores wherever there is room, the masked ones near the ends:
+    // a `vpmaskmovd` store is slow on AMD's cores. With it for every
+    // vertex's records, the dragon's emit pass took 13.40–13.51 ms against
+    // 11.72–11.85 (the command of the module's doc, four alternations, a
+    // fourth run of the masked form at 20.07 ms left out as noise).
     unsafe {
         let opp = out.opp.add(out.records);
         if out.records + 8 <= out.room {
