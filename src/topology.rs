@@ -19,6 +19,8 @@ use std::borrow::Cow;
 use std::mem::MaybeUninit;
 
 #[cfg(target_arch = "x86_64")]
+mod count_avx2;
+#[cfg(target_arch = "x86_64")]
 mod emit_avx2;
 
 /// Edges in compressed-row form.
@@ -294,7 +296,7 @@ fn build_edges_in<const TRI: bool>(
         .par_iter()
         .map(|tris| {
             let _part = crate::trace::span("topology: count (part)");
-            let (count, odd) = count_chunk(tris, ranges, simd == Simd::Avx512, parity);
+            let (count, odd) = count_chunk(tris, ranges, simd, parity);
             odd_edges.fetch_xor(odd, std::sync::atomic::Ordering::Relaxed);
             count
         })
@@ -1383,7 +1385,7 @@ fn emit_range<const TRI: bool>(
 enum Simd {
     /// The scalar loops.
     Plain,
-    /// Pass 3's AVX2 kernel (`emit_avx2`), the scalar loops elsewhere.
+    /// Pass 3's AVX2 kernel (`emit_avx2`) and pass 1's (`count_avx2`).
     Avx2,
     /// Pass 3's AVX-512 kernel and `sort_range_bmi2`, and pass 1's
     /// `count_avx512`.
@@ -2023,9 +2025,10 @@ impl KernelOut {
 /// Pass 1 for one chunk of triangles: per range, its listings (high 32
 /// bits) and records (low 32 bits), and with `parity` the xor of the keys
 /// of its triangles' edges (see the pass in [`build_edges_in`]); the
-/// kernel ([`count_avx512`]) takes the whole blocks of 16 triangles when
-/// `simd`, the scalar loop the rest.
-fn count_chunk(tris: &[u32], ranges: usize, simd: bool, parity: bool) -> (Vec<u64>, u64) {
+/// kernel `simd` names ([`count_avx512`], 16 triangles a block, or
+/// `count_avx2::count_avx2`, 8) takes the whole blocks, the scalar loop the
+/// rest.
+fn count_chunk(tris: &[u32], ranges: usize, simd: Simd, parity: bool) -> (Vec<u64>, u64) {
     // Lanes of counters, triangle i's in lane i % COUNT_LANES, each lane
     // two planes of its own (lo, then mid), summed after the loop: a
     // triangle's lo and mid, and consecutive triangles, mostly fall in one
@@ -2039,12 +2042,20 @@ fn count_chunk(tris: &[u32], ranges: usize, simd: bool, parity: bool) -> (Vec<u6
     let mut lanes = vec![0u64; 2 * COUNT_LANES * ranges];
     let mut odd = 0u64;
     #[cfg(target_arch = "x86_64")]
-    let done = match (simd, parity) {
-        // SAFETY: `simd` is set only where the CPU has AVX-512F and
-        // AVX-512DQ (`simd_available`).
-        (true, false) => unsafe { count_avx512::<false>(tris, &mut lanes, ranges, &mut odd) },
-        (true, true) => unsafe { count_avx512::<true>(tris, &mut lanes, ranges, &mut odd) },
-        (false, _) => 0,
+    // SAFETY: `Simd::Avx512` is set only where the CPU has AVX-512F and
+    // AVX-512DQ, `Simd::Avx2` only where it has AVX2 (`simd_level`).
+    let done = unsafe {
+        match (simd, parity) {
+            (Simd::Avx512, false) => count_avx512::<false>(tris, &mut lanes, ranges, &mut odd),
+            (Simd::Avx512, true) => count_avx512::<true>(tris, &mut lanes, ranges, &mut odd),
+            (Simd::Avx2, false) => {
+                count_avx2::count_avx2::<false>(tris, &mut lanes, ranges, &mut odd)
+            }
+            (Simd::Avx2, true) => {
+                count_avx2::count_avx2::<true>(tris, &mut lanes, ranges, &mut odd)
+            }
+            (Simd::Plain, _) => 0,
+        }
     };
     #[cfg(not(target_arch = "x86_64"))]
     let done = {
@@ -2531,8 +2542,9 @@ mod tests {
 
     #[test]
     fn count_kernel_counts_and_xors_as_the_scalar_loop() {
-        // Pass 1 with the kernel on the whole blocks against the scalar
-        // loop on every triangle: the same counts per range, and the same
+        // Pass 1 with each kernel the CPU has (AVX-512, AVX2) on the
+        // whole blocks against the scalar loop on every triangle: the
+        // same counts per range, and the same
         // xor of the edges' keys, exactly; and that xor is 0 on a soup
         // whose every edge has two triangles (each triangle twice). Sizes
         // with and without a tail after the last block, over one range
@@ -2540,14 +2552,14 @@ mod tests {
         // (a soup with each triangle twice still gives 0 then), and each
         // block's adds read from the block's own slot instead of the one
         // before.
-        if simd_level() != Simd::Avx512 {
-            return;
-        }
-        for (vertices, triangles, seed) in [
-            (5 * RANGE + 11, 16 * 700 + 9, 0x9e37_79b9),
-            (300, 16 * 40, 0x2545_f491),
-            (RANGE / 2, 15, 0x1234_5678),
-        ] {
+        for (simd, (vertices, triangles, seed)) in kernels().into_iter().flat_map(|k| {
+            [
+                (5 * RANGE + 11, 16 * 700 + 9, 0x9e37_79b9),
+                (300, 16 * 40, 0x2545_f491),
+                (RANGE / 2, 15, 0x1234_5678),
+            ]
+            .map(|c| (k, c))
+        }) {
             let soup = strip_soup(vertices, triangles, seed);
             let twice: Vec<u32> = soup
                 .chunks_exact(3)
@@ -2555,16 +2567,20 @@ mod tests {
                 .collect();
             let ranges = vertices.div_ceil(RANGE);
             for tris in [&soup, &twice] {
-                let (want, want_odd) = count_chunk(tris, ranges, false, true);
+                let (want, want_odd) = count_chunk(tris, ranges, Simd::Plain, true);
                 for parity in [false, true] {
-                    let (got, odd) = count_chunk(tris, ranges, true, parity);
-                    assert!(got == want, "{vertices} vertices: counts");
-                    assert_eq!(odd, if parity { want_odd } else { 0 }, "{vertices}: xor");
+                    let (got, odd) = count_chunk(tris, ranges, simd, parity);
+                    assert!(got == want, "{simd:?}, {vertices} vertices: counts");
+                    assert_eq!(
+                        odd,
+                        if parity { want_odd } else { 0 },
+                        "{simd:?}, {vertices}: xor"
+                    );
                 }
             }
-            let (_, odd) = count_chunk(&twice, ranges, true, true);
+            let (_, odd) = count_chunk(&twice, ranges, simd, true);
             assert_eq!(odd, 0, "{vertices} vertices: every edge twice");
-            let (_, odd) = count_chunk(&soup, ranges, true, true);
+            let (_, odd) = count_chunk(&soup, ranges, simd, true);
             assert_ne!(odd, 0, "{vertices} vertices: open edges");
         }
     }
