@@ -213,9 +213,9 @@ fn bench_mesh(c: &mut Criterion, m: &Mesh, scratch: &Path) {
             )
         })
     });
-    // The same without the AVX-512 kernels: pass 3's AVX2 kernel (since
-    // the sixty-first round), which runs where the CPU has AVX2 but not
-    // AVX-512.
+    // The same without the AVX-512 kernels: passes 1 and 3's AVX2
+    // kernels (since the sixty-first round), which run where the CPU has
+    // AVX2 but not AVX-512.
     g.bench_function(format!("opposites_only_avx2/{n}"), |b| {
         svpack::evaluate_simd::disable_avx512(true);
         b.iter(|| {

@@ -43,12 +43,12 @@
 //! before freed instead of faulting in fresh pages, whose cost on this
 //! machine varies more than the code's; `NO_AVX512=1` turns the crate's
 //! AVX-512 kernels off (`evaluate_simd::disable_avx512`), which times the
-//! topology's AVX2 emit (the scalar one without AVX2) on the same binary;
-//! `SCALAR_TOPOLOGY=1` turns every topology kernel off
-//! (`topology::scalar_topology`), which times its scalar passes; `NO_THP=1` (Linux) turns
-//! transparent huge pages off for the process (`PR_SET_THP_DISABLE`), so
-//! that every block is in 4 KiB pages, which tells what the TLB's misses
-//! cost a step (fifty-second round, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo
+//! topology's AVX2 count and emit (the scalar ones without AVX2) on the
+//! same binary; `SCALAR_TOPOLOGY=1` turns every topology kernel off
+//! (`topology::scalar_topology`), which times its scalar passes;
+//! `NO_THP=1` (Linux) turns transparent huge pages off for the process
+//! (`PR_SET_THP_DISABLE`), so that every block is in 4 KiB pages, which
+//! tells what the TLB's misses cost a step (fifty-second round, `RECYCLE=1 RAYON_NUM_THREADS=1 cargo
 //! run --release --example stage_probe -- weld
 //! target/targets/scene_5000000.obj` with and without it, three
 //! alternations: the weld 66.7–68.2 ms in huge pages, 68.6–72.0 in small

@@ -286,8 +286,8 @@ pub(crate) fn have_avx2() -> bool {
 static AVX512_OFF: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
 /// Makes the evaluator skip its AVX-512 kernels (AVX2 then runs where the
-/// CPU has it), and the topology its AVX-512 passes (its AVX2 emit then
-/// runs where the CPU has AVX2), until called again
+/// CPU has it), and the topology its AVX-512 passes (its AVX2 count and
+/// emit then run where the CPU has AVX2), until called again
 /// with `false`. For benchmarks, which time both in one run; results are
 /// bit for bit the same either way.
 #[doc(hidden)]
