@@ -884,7 +884,6 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
     // ids), and no record has been written over them yet (the caller's
     // order).
     let entry = |j: usize| unsafe { at.wrapping_add(j).read_unaligned() };
-    let per_line = (64 / std::mem::size_of::<E>()).max(1);
     let ids = buckets.tri as *const u32;
     let fill = &mut scratch.fill[..vertices];
     fill.fill(0);
@@ -899,15 +898,8 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
     let first_slot = slots_at(&scratch.pairs);
     let pairs = &mut scratch.pairs[first_slot..first_slot + vertices * SLOTS];
     let (tri, spill) = (&mut scratch.tri[..], &mut scratch.spill);
-    for j in from..from + len {
-        if j.is_multiple_of(per_line) {
-            crate::hint::prefetch_stream(at.wrapping_add(j));
-        }
-        let e = entry(j);
-        debug_assert!(!e.unwritten(), "topology: listing not written");
-        let place = e.place();
-        let c = fill[place] as usize;
-        fill[place] += 1;
+    // Listing j, its vertex's c-th, to its slot (or the spill).
+    let mut put = |j: usize, e: E, place: usize, c: usize| {
         let pair = if DEPOSIT {
             // SAFETY: DEPOSIT only in `sort_range_bmi2`.
             unsafe { e.pair_deposited(bits) }
@@ -930,10 +922,69 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
         } else {
             spill.push((place as u32, pair, id));
         }
+    };
+    // Blocks of SORT_BLOCK listings: their counters are all read, each
+    // listing's slot is its counter plus the earlier listings of the block
+    // at the same vertex, and the counters are then stored (in order, so
+    // the last of a vertex's stores holds its count).
+    let end = from + len;
+    let mut j = from;
+    while j + SORT_BLOCK <= end {
+        crate::hint::prefetch_stream(at.wrapping_add(j));
+        let e: [E; SORT_BLOCK] = std::array::from_fn(|k| entry(j + k));
+        debug_assert!(
+            e.iter().all(|e| !e.unwritten()),
+            "topology: listing not written"
+        );
+        let p = e.map(|e| e.place());
+        let f = p.map(|p| fill[p] as usize);
+        let mut c = [0usize; SORT_BLOCK];
+        for k in 0..SORT_BLOCK {
+            let mut n = f[k];
+            for i in 0..k {
+                n += usize::from(p[i] == p[k]);
+            }
+            c[k] = n;
+        }
+        for k in 0..SORT_BLOCK {
+            fill[p[k]] = c[k] as u32 + 1;
+        }
+        for k in 0..SORT_BLOCK {
+            put(j + k, e[k], p[k], c[k]);
+        }
+        j += SORT_BLOCK;
+    }
+    for j in j..end {
+        let e = entry(j);
+        debug_assert!(!e.unwritten(), "topology: listing not written");
+        let place = e.place();
+        let c = fill[place] as usize;
+        fill[place] += 1;
+        put(j, e, place, c);
     }
     // Each vertex's spilled listings together, in listing order (stable).
     spill.sort_by_key(|s| s.0);
 }
+
+/// Listings [`sort_range`] puts by vertex at once (the rest one by one).
+///
+/// Why: each listing's slot is its vertex's counter, which is loaded,
+/// incremented and stored, and a following listing of the same vertex
+/// loads it again: a chain through memory from listing to listing (most
+/// often between neighbours: a triangle's listing and the next
+/// triangle's, under the vertex they share). With the counters of a
+/// block loaded at once and the block's repeats counted in registers, the
+/// chain goes from block to block. One thread, `RECYCLE=1
+/// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe --
+/// passes FILE`, the emit pass on this AMD EPYC (Zen 3), fastest /
+/// median, binaries alternated: the dragon 11.66 / 11.75 → 10.12 / 10.25
+/// ms, the 5M scene 59.26 / 59.45 → 50.06 / 51.49 ms (four alternations
+/// each). Blocks of 2 took the dragon's pass 10.47–10.57 ms; blocks of 6
+/// and 8 took longer than single listings (their arrays went to the
+/// stack). Before, the ranges' sort alone (the kernel left out, a local
+/// edit) took 5.5–5.9 ms of the 11.7, and 2.3–2.9 ms with the counters
+/// not read at all: most of the sort was the chain.
+const SORT_BLOCK: usize = 4;
 
 /// [`sort_range`] with each packed listing's pair taken by one `pdep`
 /// ([`Entry::pair_deposited`]), for CPUs with BMI2 (every one that runs
