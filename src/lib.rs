@@ -26,6 +26,7 @@ pub mod quantize;
 pub mod removals;
 pub mod report;
 pub mod shadow;
+mod slots;
 pub mod topology;
 pub mod trace;
 pub mod verify;

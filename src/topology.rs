@@ -865,6 +865,18 @@ impl Scratch {
 /// on a cache-line boundary and the kernel's load of them whole
 /// (against 6.84–6.90 without); the 5M scene 39.63–39.77 → 35.91–36.25
 /// ms (two).
+///
+/// The listings go a block at a time ([`crate::slots`]): each listing's
+/// slot is its vertex's counter, and a following listing of the same
+/// vertex (most often the next: a triangle's and the next triangle's,
+/// under the vertex they share) waited for its store. One thread,
+/// `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release --example
+/// stage_probe -- passes FILE`, the emit pass on this AMD EPYC (Zen 3),
+/// fastest / median, binaries alternated: the dragon 11.66 / 11.75 →
+/// 10.12 / 10.25 ms, the 5M scene 59.26 / 59.45 → 50.06 / 51.49 ms (four
+/// alternations each). Before, the ranges' sort alone (the kernel left
+/// out, a local edit) took 5.5–5.9 ms of the dragon's 11.7, and 2.3–2.9 ms
+/// with the counters not read at all.
 // Inlined so that `sort_range_bmi2`'s copy is compiled with BMI2, which
 // `Entry::pair_deposited`'s `pdep` needs to be inlined in its loop.
 #[inline(always)]
@@ -923,36 +935,24 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
             spill.push((place as u32, pair, id));
         }
     };
-    // Blocks of SORT_BLOCK listings: their counters are all read, each
-    // listing's slot is its counter plus the earlier listings of the block
-    // at the same vertex, and the counters are then stored (in order, so
-    // the last of a vertex's stores holds its count).
+    // Blocks of listings, their slots taken at once (`slots::take`), then
+    // the rest one by one.
+    const BLOCK: usize = crate::slots::BLOCK;
     let end = from + len;
     let mut j = from;
-    while j + SORT_BLOCK <= end {
+    while j + BLOCK <= end {
         crate::hint::prefetch_stream(at.wrapping_add(j));
-        let e: [E; SORT_BLOCK] = std::array::from_fn(|k| entry(j + k));
+        let e: [E; BLOCK] = std::array::from_fn(|k| entry(j + k));
         debug_assert!(
             e.iter().all(|e| !e.unwritten()),
             "topology: listing not written"
         );
         let p = e.map(|e| e.place());
-        let f = p.map(|p| fill[p] as usize);
-        let mut c = [0usize; SORT_BLOCK];
-        for k in 0..SORT_BLOCK {
-            let mut n = f[k];
-            for i in 0..k {
-                n += usize::from(p[i] == p[k]);
-            }
-            c[k] = n;
-        }
-        for k in 0..SORT_BLOCK {
-            fill[p[k]] = c[k] as u32 + 1;
-        }
-        for k in 0..SORT_BLOCK {
+        let c = crate::slots::take(p, fill);
+        for k in 0..BLOCK {
             put(j + k, e[k], p[k], c[k]);
         }
-        j += SORT_BLOCK;
+        j += BLOCK;
     }
     for j in j..end {
         let e = entry(j);
@@ -965,26 +965,6 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
     // Each vertex's spilled listings together, in listing order (stable).
     spill.sort_by_key(|s| s.0);
 }
-
-/// Listings [`sort_range`] puts by vertex at once (the rest one by one).
-///
-/// Why: each listing's slot is its vertex's counter, which is loaded,
-/// incremented and stored, and a following listing of the same vertex
-/// loads it again: a chain through memory from listing to listing (most
-/// often between neighbours: a triangle's listing and the next
-/// triangle's, under the vertex they share). With the counters of a
-/// block loaded at once and the block's repeats counted in registers, the
-/// chain goes from block to block. One thread, `RECYCLE=1
-/// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe --
-/// passes FILE`, the emit pass on this AMD EPYC (Zen 3), fastest /
-/// median, binaries alternated: the dragon 11.66 / 11.75 → 10.12 / 10.25
-/// ms, the 5M scene 59.26 / 59.45 → 50.06 / 51.49 ms (four alternations
-/// each). Blocks of 2 took the dragon's pass 10.47–10.57 ms; blocks of 6
-/// and 8 took longer than single listings (their arrays went to the
-/// stack). Before, the ranges' sort alone (the kernel left out, a local
-/// edit) took 5.5–5.9 ms of the 11.7, and 2.3–2.9 ms with the counters
-/// not read at all: most of the sort was the chain.
-const SORT_BLOCK: usize = 4;
 
 /// [`sort_range`] with each packed listing's pair taken by one `pdep`
 /// ([`Entry::pair_deposited`]), for CPUs with BMI2 (every one that runs
