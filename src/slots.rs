@@ -15,7 +15,7 @@
 
 /// Keys a block of [`take`] holds in its two users. Why 4: the topology's
 /// sort took 10.47–10.57 ms of the dragon's emit pass with blocks of 2
-/// against 10.12–10.28 with 4, and blocks of 6 and 8 took longer than
+/// against 10.33–10.50 with 4, and blocks of 6 and 8 took longer than
 /// single elements (their arrays went to the stack; `RECYCLE=1
 /// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe --
 /// passes target/dragon/dragon.glb`, three alternations).

@@ -875,7 +875,7 @@ impl Scratch {
 /// fastest / median, binaries alternated: the dragon 11.66 / 11.75 →
 /// 10.12 / 10.25 ms, the 5M scene 59.26 / 59.45 → 50.06 / 51.49 ms (four
 /// alternations each). Before, the ranges' sort alone (the kernel left
-/// out, a local edit) took 5.5–5.9 ms of the dragon's 11.7, and 2.3–2.9 ms
+/// out, a local edit) took 5.5–5.9 ms of the dragon's 11.7, and 2.3–4.1 ms
 /// with the counters not read at all.
 // Inlined so that `sort_range_bmi2`'s copy is compiled with BMI2, which
 // `Entry::pair_deposited`'s `pdep` needs to be inlined in its loop.
