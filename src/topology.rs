@@ -9,7 +9,7 @@
 //!
 //! Method: every triangle is listed (by its other two corners, 8 bytes)
 //! under the two corners that are the smaller endpoint of one of its edges,
-//! appended to the range of 8,192 vertices the corner falls in; then, range
+//! appended to the range of 2,048 vertices the corner falls in; then, range
 //! by range, the listings are put by vertex in a buffer that stays in the
 //! cache, and vertex by vertex that vertex's edges sorted by larger
 //! endpoint, a handful of records on real meshes (the vertex valence). See
@@ -850,8 +850,8 @@ impl Scratch {
 /// first [`SLOTS`] listings in its slots from `i * SLOTS` (past
 /// [`slots_at`]), the rest in `scratch.spill`, by vertex and then in
 /// listing order, and its number of listings in `scratch.fill[i]`. One
-/// pass: each listing goes to its vertex's next slot. The counters (32 KB)
-/// and the slots (512 KB for a whole range) stay in L2.
+/// pass: each listing goes to its vertex's next slot. The counters (8 KB)
+/// and the slots (128 KB for a whole range) stay in L2.
 ///
 /// Why slots (until the thirty-sixth round a counting sort on the place
 /// put the listings one vertex after the other: a pass to count them,
@@ -872,7 +872,8 @@ impl Scratch {
 /// under the vertex they share) waited for its store. One thread,
 /// `RECYCLE=1 RAYON_NUM_THREADS=1 cargo run --release --example
 /// stage_probe -- passes FILE`, the emit pass on this AMD EPYC (Zen 3),
-/// fastest / median, binaries alternated: the dragon 11.66 / 11.75 →
+/// with ranges of 8,192 vertices then (see [`RANGE_SHIFT`]), fastest /
+/// median, binaries alternated: the dragon 11.66 / 11.75 →
 /// 10.12 / 10.25 ms, the 5M scene 59.26 / 59.45 → 50.06 / 51.49 ms (four
 /// alternations each). Before, the ranges' sort alone (the kernel left
 /// out, a local edit) took 5.5–5.9 ms of the dragon's 11.7, and 2.3–4.1 ms
@@ -1037,7 +1038,7 @@ impl Edges {
 /// on another thread ([`build_edges_opposites_only_fed`]).
 ///
 /// The emit writes edge after edge, each with its opposite vertices, in
-/// their final places; after every range of 8,192 vertices it
+/// their final places; after every range of 2,048 vertices it
 /// publishes how many edges are done (a release store), and a reader that
 /// has seen that count (an acquire load) reads those edges while later
 /// ones are written after them: the writer never writes below the count
@@ -1111,8 +1112,8 @@ impl EmitFeed {
 }
 
 /// Vertices an [`EmitFeed`]'s emit pass does between two publications: a
-/// range (pass 3 sorts and emits whole ranges), some 20,000 edges, so a
-/// reader waits little, and 54 steps for the dragon's vertices.
+/// range (pass 3 sorts and emits whole ranges), some 5,000 edges, so a
+/// reader waits little, and 213 steps for the dragon's vertices.
 const FEED_STEP: usize = RANGE;
 
 /// Pass 3 of [`build_edges_in`] as one job in vertex order, with
@@ -2336,13 +2337,25 @@ const NETWORK8: [&[(usize, usize)]; 6] = [
 ];
 
 /// log2 of the vertices per range of [`build_edges`]: enough ranges for
-/// the threads to share, few enough that pass 2 writes few streams at once
-/// (with 4,096 vertices per range its list pass took 37 ms on the 5M
-/// scene, with 16,384 30 ms, with 8,192 32 ms; the dragon 5.0, 4.7 and
-/// 4.0–4.6 ms; one thread, `stage_probe -- passes` on local edits), and
-/// small enough that a range's listings stay in L2 while pass 3 sorts and
-/// emits them.
-const RANGE_SHIFT: u32 = 13;
+/// the threads to share, few enough that pass 2 writes few streams at once,
+/// and small enough that a range's listings and slots stay in L2 while
+/// pass 3 sorts and emits them.
+///
+/// 2,048 since the sixty-second round, on this AMD EPYC (Zen 3, 512 KiB
+/// of L2), with the sort's blocks (`slots::take`): one thread, `RECYCLE=1
+/// RAYON_NUM_THREADS=1 cargo run --release --example stage_probe --
+/// passes FILE`, the topology, fastest / median of three alternations
+/// against 8,192: the dragon 14.87 / 14.89 against 15.41 / 15.61 ms (the
+/// emit 9.84 against 10.17 ms at the fastest, the list pass 3.72 against
+/// 3.88), the 5M scene 78.95 / 80.65 against 85.02 / 85.33 ms (the emit
+/// 48.85 against 51.56, the list pass 22.96 against 23.97). With 4,096
+/// the 5M scene took 82.14–86.63 ms, with 1,024 the dragon's list pass
+/// 4.46–4.80 ms. Before the blocks 8,192 had been best: an earlier
+/// round's list pass with 4,096 vertices per range took 37 ms on the 5M
+/// scene, with 16,384 30 ms, with 8,192 32 ms, and the dragon's 5.0, 4.7
+/// and 4.0–4.6 ms; the sixtieth round (on the Intel Xeon) and the
+/// sixty-first (on this host) measured 4,096 again and dropped it.
+const RANGE_SHIFT: u32 = 11;
 /// Vertices per range.
 const RANGE: usize = 1 << RANGE_SHIFT;
 /// How many listings ahead of a range's next slot pass 2 asks for that
@@ -2628,7 +2641,9 @@ mod tests {
         // chunk listing from its range's start (the earlier chunks'
         // listings not skipped) and a range's counts one place off in
         // `sort_range`.
-        let vertices = 3 * RANGE + 77;
+        // (At least 24,653 vertices whatever the ranges' size: the strip
+        // must be sparse enough that some vertices have few listings.)
+        let vertices = (3 * RANGE + 77).max(24_653);
         let mut tris = strip_soup(vertices, PARALLEL_MIN + 5000, 0x9e37_79b9_7f4a_7c15);
         for i in 0..100u32 {
             tris.extend_from_slice(&[RANGE as u32, RANGE as u32 + 1 + i % 50, 5 + i]);
