@@ -959,8 +959,7 @@ fn sort_range<E: Entry, const TRI: bool, const DEPOSIT: bool>(
         let e = entry(j);
         debug_assert!(!e.unwritten(), "topology: listing not written");
         let place = e.place();
-        let c = fill[place] as usize;
-        fill[place] += 1;
+        let [c] = crate::slots::take([place], fill);
         put(j, e, place, c);
     }
     // Each vertex's spilled listings together, in listing order (stable).
@@ -1295,6 +1294,7 @@ fn emit_ranges<const TRI: bool>(
         ..
     } = out;
     let (mut records, mut edges) = (0usize, 0usize);
+    let listing_bytes = std::mem::size_of::<u32>() * if buckets.bits.is_some() { 2 } else { 3 };
     let mut v = vertices.start;
     while v < vertices.end {
         let next = (v + RANGE).min(vertices.end);
@@ -1312,8 +1312,7 @@ fn emit_ranges<const TRI: bool>(
         }
         // Records may go as far as the listings read, which end with this
         // range's (a listing gives at most 2 records, and takes 2 or 3 u32).
-        let words = std::mem::size_of::<u32>() * if buckets.bits.is_some() { 2 } else { 3 };
-        let read = buckets.at + words * buckets.start[r + 1] as usize;
+        let read = buckets.at + listing_bytes * buckets.start[r + 1] as usize;
         let o_opp = opp.wrapping_add(records);
         let o = GroupOut {
             opp: o_opp,
@@ -1453,11 +1452,18 @@ fn simd_level() -> Simd {
         {
             return Simd::Avx512;
         }
-        if crate::evaluate_simd::have_avx2() && std::arch::is_x86_feature_detected!("popcnt") {
+        if avx2_kernels_run() {
             return Simd::Avx2;
         }
     }
     Simd::Plain
+}
+
+/// Whether the CPU runs the AVX2 kernels (`Simd::Avx2`): it has AVX2 and
+/// POPCNT (run-time checks).
+#[cfg(target_arch = "x86_64")]
+fn avx2_kernels_run() -> bool {
+    crate::evaluate_simd::have_avx2() && std::arch::is_x86_feature_detected!("popcnt")
 }
 
 /// Pass 3 for vertex `v`, whose listings `listed` start at `from`: its
@@ -2747,7 +2753,7 @@ mod tests {
     fn simd_levels() -> Vec<Simd> {
         let mut levels = vec![Simd::Plain];
         #[cfg(target_arch = "x86_64")]
-        if crate::evaluate_simd::have_avx2() && std::arch::is_x86_feature_detected!("popcnt") {
+        if avx2_kernels_run() {
             levels.push(Simd::Avx2);
         }
         if simd_level() == Simd::Avx512 {

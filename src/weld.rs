@@ -828,27 +828,26 @@ fn sort_vertices<'w>(
                 let b: [usize; BLOCK] = std::array::from_fn(|k| ids[j + k] as usize);
                 let slots = crate::slots::take(b, &mut next);
                 for (i, slot) in (j..).zip(slots) {
+                    // The bucket's line four lines on: see `SCATTER_AHEAD`.
                     crate::hint::prefetch_ptr(out.0.wrapping_add(slot + SCATTER_AHEAD));
                     let w = vertex_word_wide(&c[i..i + 2], first + i);
-                    // SAFETY: as below.
+                    // SAFETY: the slot is below n (the buckets' sizes add
+                    // up to n), and each is this part's alone: parts get
+                    // disjoint runs of slots in every bucket, and `next`
+                    // steps through this part's run.
                     unsafe { out.0.add(slot).write(MaybeUninit::new(w)) };
                 }
             }
             for (i, (&p, &b)) in c.iter().zip(ids).enumerate().skip(done) {
                 crate::hint::prefetch_stream(c.as_ptr().wrapping_add(i));
-                let slot = &mut next[b as usize];
-                // The bucket's line four lines on: see `SCATTER_AHEAD`.
-                crate::hint::prefetch_ptr(out.0.wrapping_add(*slot as usize + SCATTER_AHEAD));
-                // SAFETY: the slot is below n (the buckets' sizes add up
-                // to n), and each is this part's alone: parts get disjoint
-                // runs of slots in every bucket, and `next` steps through
-                // this part's run.
+                let [slot] = crate::slots::take([b as usize], &mut next);
+                crate::hint::prefetch_ptr(out.0.wrapping_add(slot + SCATTER_AHEAD));
                 let w = match c.get(i..i + 2) {
                     Some(two) => vertex_word_wide(two, first + i),
                     None => vertex_word(p, first + i),
                 };
-                unsafe { out.0.add(*slot as usize).write(MaybeUninit::new(w)) };
-                *slot += 1;
+                // SAFETY: as in the blocks.
+                unsafe { out.0.add(slot).write(MaybeUninit::new(w)) };
             }
         });
     drop(ids);
