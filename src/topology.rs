@@ -2472,14 +2472,16 @@ const STATS_BLOCK: usize = 1 << 16;
 /// Until the sixty-third round the walk was of the whole block. The 5M
 /// scene's non-manifold edges (4,598 of 7.5M) are in 228 of its 230
 /// blocks of `layout::BLOCK`, so its plan walked nearly every edge: `Plan::new`
-/// over the scene's edges 7.0–7.5 ms, now 3.0–3.1 ms, against 1.7–2.1 ms
-/// to read `starts` once (one thread, a local probe, fastest of 30, three
-/// alternations; chunks of 64 edges 2.9–3.2 ms, of 1,024 4.5–4.7 ms; the
-/// sums over the whole block with a second, vectorised reading to find
-/// the chunks 4.0–4.3 ms). `RAYON_NUM_THREADS=1 cargo run --release
-/// --example stage_probe -- build target/targets/scene_5000000.obj`, its
-/// `plan`: 7.24–11.96 → 2.98–5.32 ms (three alternations); the dragon's,
-/// which has no such fans, 0.30–0.52 ms either way.
+/// over the scene's edges 7.0–7.9 ms, now 3.0–3.2 ms, against 1.7–2.1 ms
+/// to read `starts` once (one thread, a local probe, fastest of 30, six
+/// alternations; the dragon's, which has no such fans, 0.28–0.55 against
+/// 0.30–0.53 ms; on the scene, chunks of 64 edges 2.9–3.2 ms, of 1,024
+/// 4.5–4.7 ms, and the sums over the whole block with a second, vectorised
+/// reading to find the chunks 4.0–4.3 ms, three alternations).
+/// `RAYON_NUM_THREADS=1 cargo run --release --example stage_probe -- build
+/// target/targets/scene_5000000.obj`, its `plan`: 7.24–11.96 → 2.98–5.32
+/// ms (three alternations); the dragon's 0.30–0.52 → 0.48–0.53 ms, within
+/// that probe's noise.
 pub(crate) fn fan_histogram(starts: &[u32]) -> Vec<u64> {
     let mut hist = vec![0u64; 3];
     let fans = starts.len().saturating_sub(1);
