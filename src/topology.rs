@@ -434,10 +434,21 @@ fn build_edges_in<const TRI: bool>(
     // records of 4, and a range's listings are all read (into the job's
     // scratch) before its records are written, so a group's writes never
     // reach a listing it has not read, nor another group's listings.
+    //
+    // One group writes its edges from the front, as many as there are
+    // edges: half the records on a closed mesh, a little more with open
+    // edges. Kept memory goes to that front (`alloc::vec_touching`), with
+    // room for open edges up to a sixteenth of the records; several groups
+    // write at their records' offsets, all through the arrays.
+    let touched = if groups == 1 {
+        n / 2 + n / 32 + 1
+    } else {
+        n + 1
+    };
     let mut e = Edges {
-        a: Vec::with_capacity(n),
-        b: Vec::with_capacity(n),
-        opp_start: Vec::with_capacity(n + 1),
+        a: crate::alloc::vec_touching(n, touched),
+        b: crate::alloc::vec_touching(n, touched),
+        opp_start: crate::alloc::vec_touching(n + 1, touched),
         opp: Vec::new(),
         opp_tri: Vec::with_capacity(if TRI { n } else { 0 }),
     };
