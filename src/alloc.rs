@@ -707,10 +707,9 @@ mod sys {
         map_with(size, super::COLD_FAULT, super::COLD_PAUSE)
     }
 
-    /// [`map`] with `cold` as the slowest fault that keeps the hint and
-    /// `pause` as the pause after a slower one (tests pass a zero `cold` to
-    /// take the cold path on any machine).
-    pub fn map_with(size: usize, cold: Duration, pause: Duration) -> *mut u8 {
+    /// A fresh anonymous private mapping of `size` bytes, not yet hinted;
+    /// null on failure.
+    fn anon(size: usize) -> *mut libc::c_void {
         // SAFETY: an anonymous private mapping has no preconditions.
         let p = unsafe {
             libc::mmap(
@@ -723,6 +722,18 @@ mod sys {
             )
         };
         if p == libc::MAP_FAILED {
+            std::ptr::null_mut()
+        } else {
+            p
+        }
+    }
+
+    /// [`map`] with `cold` as the slowest fault that keeps the hint and
+    /// `pause` as the pause after a slower one (tests pass a zero `cold` to
+    /// take the cold path on any machine).
+    pub fn map_with(size: usize, cold: Duration, pause: Duration) -> *mut u8 {
+        let p = anon(size);
+        if p.is_null() {
             return std::ptr::null_mut();
         }
         // During a pause, small pages while the budget lasts. With the
@@ -774,18 +785,8 @@ mod sys {
     /// [`map`] hints, without [`map`]'s probe: kept blocks are about to
     /// replace its front, which the probe would fault in. Null on failure.
     pub fn reserve(size: usize) -> *mut u8 {
-        // SAFETY: an anonymous private mapping has no preconditions.
-        let p = unsafe {
-            libc::mmap(
-                std::ptr::null_mut(),
-                size,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_PRIVATE | libc::MAP_ANONYMOUS,
-                -1,
-                0,
-            )
-        };
-        if p == libc::MAP_FAILED {
+        let p = anon(size);
+        if p.is_null() {
             return std::ptr::null_mut();
         }
         advise(p, size, hinting() || !take_small(size));
@@ -1159,6 +1160,29 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
         sys::set_small_budget(u64::MAX);
     }
 
+    /// A layout of `size` bytes, the alignment the crate's buffers have.
+    fn lay(size: usize) -> Layout {
+        Layout::from_size_align(size, 8).unwrap()
+    }
+
+    /// The lock of the tests that use the cache, and a guard that keeps
+    /// freed blocks.
+    fn serial_and_kept() -> (std::sync::MutexGuard<'static, ()>, KeepFreed) {
+        let serial = SERIAL.lock().unwrap();
+        (serial, KeepFreed::new())
+    }
+
+    /// Unmaps every kept block (tests empty the cache themselves rather
+    /// than by a guard's drop: a build test running meanwhile may hold a
+    /// guard of its own).
+    #[cfg(target_os = "linux")]
+    fn empty_cache() {
+        while let Some((p, s)) = take(0) {
+            // SAFETY: a kept block is a mapping nobody else holds.
+            unsafe { sys::unmap(p, s) };
+        }
+    }
+
     /// Blocks and bytes the cache holds.
     #[cfg(target_os = "linux")]
     fn cached() -> (usize, usize) {
@@ -1178,7 +1202,6 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     fn freed_blocks_are_reused_and_zeroed_on_request() {
         let _serial = SERIAL.lock().unwrap();
         let a = HugePageAlloc;
-        let lay = |size| Layout::from_size_align(size, 8).unwrap();
         // Without a guard nothing is kept.
         unsafe { a.dealloc(a.alloc(lay(HUGE_MIN)), lay(HUGE_MIN)) };
         assert_eq!(cached(), (0, 0));
@@ -1243,9 +1266,7 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             );
             a.dealloc(r, lay(3 * HUGE_MIN));
             a.dealloc(t, lay(4 * HUGE_MIN));
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
+            empty_cache();
         }
         // Limits: at most CACHE_SLOTS blocks and CACHE_BYTES bytes.
         let big = CACHE_BYTES / 2 + HUGE_MIN;
@@ -1298,10 +1319,8 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     #[cfg(target_os = "linux")]
     #[test]
     fn freed_blocks_that_touch_are_kept_as_one() {
-        let _serial = SERIAL.lock().unwrap();
+        let (_serial, keep) = serial_and_kept();
         let a = HugePageAlloc;
-        let lay = |size| Layout::from_size_align(size, 8).unwrap();
-        let keep = KeepFreed::new();
         unsafe {
             let p = a.alloc(lay(5 * HUGE_MIN));
             a.dealloc(p, lay(5 * HUGE_MIN));
@@ -1397,11 +1416,7 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             );
             grown[9 * HUGE_MIN - 1] = 7;
             a.dealloc(g, lay(9 * HUGE_MIN));
-            // Emptied here rather than by the guard's drop: a build test
-            // running meanwhile may hold a guard of its own.
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
+            empty_cache();
         }
         drop(keep);
     }
@@ -1418,10 +1433,8 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     #[cfg(target_os = "linux")]
     #[test]
     fn short_kept_blocks_are_gathered_into_a_longer_one() {
-        let _serial = SERIAL.lock().unwrap();
+        let (_serial, _keep) = serial_and_kept();
         let a = HugePageAlloc;
-        let lay = |size| Layout::from_size_align(size, 8).unwrap();
-        let keep = KeepFreed::new();
         // Pieces of 1, 2 and 3 huge pages with a page left out between
         // them (so that none joins another), bytes 1, 2 and 3.
         let kept = |sizes: &[usize]| unsafe {
@@ -1456,9 +1469,7 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             // (One block, or one joined with the kept page if the kernel
             // placed the new mapping beside it.)
             assert_eq!(cached().1, 6 * HUGE_MIN, "freed whole");
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
+            empty_cache();
 
             // Longer than all of them: the front is theirs, the tail fresh;
             // the cut piece's tail is kept.
@@ -1468,9 +1479,7 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             let bytes = std::slice::from_raw_parts(p, 8 * HUGE_MIN - 5);
             assert!(bytes.iter().all(|&b| b == 0), "zeroed throughout");
             a.dealloc(p, lay(8 * HUGE_MIN - 5));
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
+            empty_cache();
             kept(&[2, 3]);
             let p = a.alloc(lay(4 * HUGE_MIN));
             assert_eq!(cached(), (1, HUGE_MIN), "the cut tail stays kept");
@@ -1478,11 +1487,8 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             assert!(bytes[..3 * HUGE_MIN].iter().all(|&b| b == 2));
             assert!(bytes[3 * HUGE_MIN..].iter().all(|&b| b == 1));
             a.dealloc(p, lay(4 * HUGE_MIN));
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
+            empty_cache();
         }
-        drop(keep);
     }
 
     /// `vec_touching` builds only the front it is told of from kept memory
@@ -1493,10 +1499,8 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     #[cfg(target_os = "linux")]
     #[test]
     fn a_vector_touching_its_front_takes_only_that_front_kept() {
-        let _serial = SERIAL.lock().unwrap();
+        let (_serial, _keep) = serial_and_kept();
         let a = HugePageAlloc;
-        let lay = |size| Layout::from_size_align(size, 8).unwrap();
-        let keep = KeepFreed::new();
         unsafe {
             let p = a.alloc(lay(8 * HUGE_MIN));
             std::slice::from_raw_parts_mut(p, 8 * HUGE_MIN).fill(7);
@@ -1517,15 +1521,12 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
             assert_eq!(cached(), (0, 0), "the next request takes the rest");
             a.dealloc(w, lay(6 * HUGE_MIN));
             a.dealloc(v, lay(8 * HUGE_MIN));
-            while let Some((p, s)) = take(0) {
-                sys::unmap(p, s);
-            }
+            empty_cache();
         }
         // `vec_touching` clears the hint even when no large block reads it.
         let small: Vec<u8> = vec_touching(16, 8);
         assert!(small.capacity() >= 16);
         assert_eq!(FRONT.with(|f| f.get()), 0);
-        drop(keep);
     }
 
     #[test]
@@ -1619,10 +1620,8 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     #[cfg(target_os = "linux")]
     #[test]
     fn a_parsers_arena_serves_its_scope_and_becomes_a_kept_block() {
-        let _serial = SERIAL.lock().unwrap();
+        let (_serial, keep) = serial_and_kept();
         let a = HugePageAlloc;
-        let lay = |size| Layout::from_size_align(size, 8).unwrap();
-        let keep = KeepFreed::new();
         assert_eq!(cached(), (0, 0));
         let ar = arena::open(64 << 20);
         let outside = unsafe { a.alloc(lay(100)) };
@@ -1707,10 +1706,8 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     #[cfg(target_os = "linux")]
     #[test]
     fn a_block_live_at_an_arenas_close_holds_its_chunk_until_freed() {
-        let _serial = SERIAL.lock().unwrap();
+        let (_serial, keep) = serial_and_kept();
         let a = HugePageAlloc;
-        let lay = |size| Layout::from_size_align(size, 8).unwrap();
-        let keep = KeepFreed::new();
         let ar = arena::open(64 << 20);
         // A small block, then six blocks of 1 MiB over four chunks.
         let (survivor, rest) = ar.scope(|| unsafe {
