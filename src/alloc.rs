@@ -515,6 +515,10 @@ unsafe fn gather(p: *mut u8, s: usize, want: usize, span: usize) -> (*mut u8, us
         at += used;
         piece = if at < want { take(want - at) } else { None };
     }
+    if at < span {
+        // SAFETY (of the hint): the rest of the new mapping, untouched.
+        sys::hint_fresh(unsafe { r.add(at) }, span - at);
+    }
     (r, at)
 }
 
@@ -781,16 +785,19 @@ mod sys {
         unsafe { libc::madvise(p, size, advice) };
     }
 
-    /// A fresh mapping of `size` bytes for [`super::gather`], hinted as
-    /// [`map`] hints, without [`map`]'s probe: kept blocks are about to
-    /// replace its front, which the probe would fault in. Null on failure.
+    /// A fresh mapping of `size` bytes for [`super::gather`], not yet
+    /// hinted and not probed: kept blocks are about to replace its front
+    /// (the probe would fault it in), and [`hint_fresh`] hints the rest.
+    /// Null on failure.
     pub fn reserve(size: usize) -> *mut u8 {
-        let p = anon(size);
-        if p.is_null() {
-            return std::ptr::null_mut();
-        }
-        advise(p, size, hinting() || !take_small(size));
-        p.cast()
+        anon(size).cast()
+    }
+
+    /// Hints the fresh pages `p..p + size` of a mapping as [`map`] hints a
+    /// fresh one (without its probe), taking them from the small-page
+    /// budget during a pause.
+    pub fn hint_fresh(p: *mut u8, size: usize) {
+        advise(p.cast(), size, hinting() || !take_small(size));
     }
 
     /// Moves the pages of `p..p + len` (page tables, not bytes) to `to..to
@@ -1161,12 +1168,14 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
     }
 
     /// A layout of `size` bytes, the alignment the crate's buffers have.
+    #[cfg(target_os = "linux")]
     fn lay(size: usize) -> Layout {
         Layout::from_size_align(size, 8).unwrap()
     }
 
     /// The lock of the tests that use the cache, and a guard that keeps
     /// freed blocks.
+    #[cfg(target_os = "linux")]
     fn serial_and_kept() -> (std::sync::MutexGuard<'static, ()>, KeepFreed) {
         let serial = SERIAL.lock().unwrap();
         (serial, KeepFreed::new())
