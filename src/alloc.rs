@@ -42,16 +42,15 @@
 //! kernel's `clear_page_erms` (`perf record` of `examples/stage_probe.rs`).
 //! A kept block is handed out again (cut to size, or, when none is long
 //! enough, several moved side by side with `mremap`, which moves page
-//! tables, not bytes, and a fresh tail after them if they do not cover
-//! the request), zeroed by a `memset` only when the caller asks for
-//! zeroed memory, as `vec![0; n]` does. A buffer reserved longer than it
-//! will be written ([`vec_touching`]) takes kept memory for its front
-//! only. The tail cut off a
-//! kept block, and the tail a shrinking `realloc` gives up, are kept as
-//! blocks of their own rather than unmapped: their pages are often touched
-//! already. On a 5M-triangle scene this took the fresh pages a build
-//! faults in (kernel `mm_page_alloc` events, huge pages) from 286 to 266
-//! MiB with one thread and from 384–394 to 316–322 MiB with two
+//! tables, not bytes, and a fresh tail after them if they do not cover the
+//! request), zeroed by a `memset` only when the caller asks for zeroed
+//! memory, as `vec![0; n]` does. A buffer reserved longer than it will be
+//! written ([`vec_touching`]) takes kept memory for its front only. The
+//! tail cut off a kept block, and the tail a shrinking `realloc` gives up,
+//! are kept as blocks of their own rather than unmapped: their pages are
+//! often touched already. On a 5M-triangle scene this took the fresh pages
+//! a build faults in (kernel `mm_page_alloc` events, huge pages) from 286
+//! to 266 MiB with one thread and from 384–394 to 316–322 MiB with two
 //! (`benches/fresh_pages.py`, two runs each), where the topology's count
 //! array was cut from the soup's 30 MiB positions and its edge arrays
 //! shrunk from their record-sized reservations. glibc's malloc keeps
@@ -310,19 +309,19 @@ static CACHE: std::sync::Mutex<[(usize, usize); CACHE_SLOTS]> =
 /// Returns the block when it is not kept (the cache then unchanged), for
 /// the caller to unmap.
 ///
-/// Why join: a kept block is cut to the size asked for and its tail kept
-/// on its own, and a block too short was grown with `mremap`, whose new
-/// tail is fresh memory (until the sixty-fourth round; now the short
-/// blocks are gathered, [`gather`]). Without joining, a loop that frees and asks again
+/// Why join: a kept block is cut to the size asked for and its tail kept on
+/// its own, and a block too short was grown with `mremap`, whose new tail
+/// is fresh memory (until the sixty-fourth round; now the short blocks are
+/// gathered, [`gather`]). Without joining, a loop that frees and asks again
 /// for the same buffers cut its blocks into ever smaller pieces, filled the
 /// slots with them and grew the pieces back with fresh pages: 14–16 huge
 /// pages faulted in per run of the dragon's weld, topology and bucket
-/// counts, and five `mremap` calls (`strace`), 2–3 ms of the kernel
-/// zeroing pages (`RECYCLE=1 cargo run --release --example stage_probe
-/// -- buckets`: 14 faults a run before, none after, the runs' median
-/// 29.7–30.2 → 27.5–28.4 ms); and a batch of six copies of the dragon,
-/// one job, one thread, faulted in 140 MiB of fresh anonymous memory
-/// before, 60–65 after (`benches/fresh_pages.py`).
+/// counts, and five `mremap` calls (`strace`), 2–3 ms of the kernel zeroing
+/// pages (`RECYCLE=1 cargo run --release --example stage_probe -- buckets`:
+/// 14 faults a run before, none after, the runs' median 29.7–30.2 →
+/// 27.5–28.4 ms); and a batch of six copies of the dragon, one job, one
+/// thread, faulted in 140 MiB of fresh anonymous memory before, 60–65 after
+/// (`benches/fresh_pages.py`).
 ///
 /// The price is in a batch's peak memory: the pieces used to be unmapped
 /// for want of a slot, or grown into address space never touched, and
