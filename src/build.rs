@@ -569,49 +569,97 @@ fn build_file_stages(
     // slow part of a fresh buffer, especially in a VM (benches/ROUNDS.md,
     // "Fifth round").
     (soup.positions, soup.indices) = (Vec::new(), Vec::new());
-    // With one thread and the caps written, the welded triangles too,
-    // once the topology has listed them
-    // (`topology::build_edges_opposites_only_owned`); if the header then
-    // outgrows its room, the caps are moved within the file, not filled
-    // again (`format::write_file_streamed_finishing`).
-    let give_triangles = ahead_file.is_some() && !two_threads;
-    let own_triangles = if give_triangles {
+    // With a file to write ahead into, the welded triangles go to the
+    // topology, which frees them once it has listed them
+    // (`topology::build_edges_opposites_only_owned`): with one thread the
+    // caps are written by then. With two, the caps are copied from the
+    // welded triangles beside the topology, which shares them
+    // (`_shared_fed`), and they are freed once both are done with them.
+    // If the header then outgrows its room, the caps are moved within the
+    // file, not filled again (`format::write_file_streamed_finishing`).
+    let kept_triangles = welded.triangle_count();
+    let give_triangles = ahead_file.is_some();
+    let mut own_triangles = if give_triangles {
         std::mem::take(&mut welded.triangles)
     } else {
         Vec::new()
+    };
+    let shared = match &ahead_file {
+        Some(_) if two_threads => Some(std::sync::Arc::new(std::mem::take(&mut own_triangles))),
+        _ => None,
+    };
+    // The caps' copy, by units any thread may take
+    // (`format::AheadFile::write_shared`): the thread that took it from
+    // the join below, and the topology's thread after its pass 1 when the
+    // emit is not fed (a mesh with open edges: its emit then runs on both
+    // threads, so the caps had better be written by then). The copy's
+    // share of the triangles goes once no unit is left to take.
+    let caps_next = std::sync::atomic::AtomicUsize::new(0);
+    let caps_triangles = std::sync::Mutex::new(shared.clone());
+    let copy_caps = |file: &format::AheadFile| -> Result<()> {
+        let lock = || caps_triangles.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(triangles) = lock().clone() else {
+            return Ok(());
+        };
+        let caps = layout::CapsRecords::from_parts(&welded.positions, &triangles);
+        let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
+        let step = || digest.step();
+        let copied = file.write_shared(
+            &caps,
+            0,
+            0,
+            file.caps_offset(),
+            &caps_next,
+            &mut bufs,
+            &step,
+        );
+        *lock() = None;
+        copied
+    };
+    let mut helped = Ok(());
+    let mut counted = |fed: bool| {
+        if let (Some(file), false) = (&ahead_file, fed) {
+            helped = copy_caps(file);
+        }
     };
     // With a file to write ahead into, the side blocks are copied while the
     // edges are made (`layout::write_sides_ahead`) on the thread that
     // copied the caps.
     let mut sides_ahead = Ok(());
     let (edges, caps_ahead) = rayon::join(
-        || match ahead_file.as_ref().filter(|_| two_threads) {
-            Some(file) => {
+        || match (ahead_file.as_ref().filter(|_| two_threads), shared) {
+            (Some(file), Some(triangles)) => {
                 let mut consumer = |feed: &topology::EmitFeed| {
-                    sides_ahead =
-                        layout::write_sides_ahead(feed, &welded, cfg.max_mult, file, &|| {
-                            digest.step()
-                        });
+                    sides_ahead = layout::write_sides_ahead(
+                        feed,
+                        &welded,
+                        kept_triangles,
+                        cfg.max_mult,
+                        file,
+                        &|| digest.step(),
+                    );
                 };
-                topology::build_edges_opposites_only_fed(
-                    &welded.triangles,
+                topology::build_edges_opposites_only_shared_fed(
+                    triangles,
                     welded.positions.len(),
                     &mut consumer,
+                    &mut counted,
                 )
             }
-            None if give_triangles => {
+            _ if give_triangles => {
                 topology::build_edges_opposites_only_owned(own_triangles, welded.positions.len())
             }
-            None => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
+            _ => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         },
         || {
-            ahead_file
-                .as_ref()
-                .filter(|_| two_threads)
-                .map(|file| write_caps_ahead(file, &layout::CapsRecords::new(&welded), &digest))
+            ahead_file.as_ref().filter(|_| two_threads).map(|file| {
+                file.reserve(0, file.sides_offset())?;
+                copy_caps(file)
+            })
         },
     );
     caps_ahead.transpose()?;
+    helped?;
     sides_ahead?;
     let ahead = ahead_file.map(format::AheadFile::finish);
     timings.topology += ms(i);

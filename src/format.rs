@@ -1098,7 +1098,9 @@ struct Piece {
 /// written before the whole payload is known ([`AheadFile::new`]), at the
 /// offsets a file with header room ([`header_room`]) puts them: the caps
 /// while the edges are being made (with one thread, from the soup before
-/// they are made), and side blocks while the rest of the edges are.
+/// they are made; with two and a mesh with open edges, by both threads
+/// after the topology's first pass, [`AheadFile::write_shared`]), and
+/// side blocks while the rest of the edges are.
 /// [`write_file_streamed_finishing`] keeps every piece that went where
 /// the final file puts it, moves up within the file those that went lower
 /// (the header outgrew its room), and writes the others again.
@@ -1198,9 +1200,9 @@ impl AheadFile {
 
     /// Writes every unit of `source`, a payload of one section, one after
     /// the other from byte `at`, on the calling thread with its `bufs`, as
-    /// units `first_unit..` of section `section` of the final payload. A thread that finds another writing
-    /// does `side` work meanwhile (as [`write_file_streamed_finishing`]
-    /// does).
+    /// units `first_unit..` of section `section` of the final payload. A
+    /// thread that finds another writing does `side` work meanwhile (as
+    /// [`write_file_streamed_finishing`] does).
     pub fn write(
         &self,
         source: &dyn PayloadSource,
@@ -1210,12 +1212,42 @@ impl AheadFile {
         bufs: &mut UnitBuffers,
         side: &dyn Fn() -> bool,
     ) -> Result<()> {
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        self.write_shared(source, first_unit, section, at, &next, bufs, side)
+    }
+
+    /// [`AheadFile::write`] by several threads at once: each call takes the
+    /// units of `source` one at a time, the next not yet taken (counted
+    /// by `next`, from 0), and returns when none is left; each unit goes
+    /// where [`AheadFile::write`] puts it. Why: a thread that would wait
+    /// for the other's copy helps with it (`build::build_mesh`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn write_shared(
+        &self,
+        source: &dyn PayloadSource,
+        first_unit: usize,
+        section: usize,
+        at: u64,
+        next: &std::sync::atomic::AtomicUsize,
+        bufs: &mut UnitBuffers,
+        side: &dyn Fn() -> bool,
+    ) -> Result<()> {
         let per_float = self.enc.vec4_bytes() / 4;
         let file = self.tmp.as_file();
         let write = |bytes: &[u8], offset: u64| self.turns.write(file, bytes, offset, side);
-        let mut pieces = Vec::with_capacity(source.units());
-        let mut at = at;
-        for u in 0..source.units() {
+        let mut pieces = Vec::new();
+        // Unit `past`'s offset is `at`: units are taken in increasing
+        // order, so each thread's offsets are running sums.
+        let (mut past, mut at) = (0, at);
+        loop {
+            let u = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if u >= source.units() {
+                break;
+            }
+            while past < u {
+                at += source.floats(past, 0) as u64 * per_float;
+                past += 1;
+            }
             let len = source.floats(u, 0) as u64 * per_float;
             let mut crc = write_unit(source, u, 1, self.enc, &[at], &mut bufs.0, &write)
                 .map_err(|e| Error::io(&self.path, e))?;
@@ -1226,7 +1258,7 @@ impl AheadFile {
                 len,
                 crc: crc.pop().unwrap_or_default(),
             });
-            at += len;
+            (past, at) = (u + 1, at + len);
         }
         self.pieces
             .lock()
@@ -2115,6 +2147,23 @@ mod tests {
         }
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("f.svpk");
+        let (header, mesh) = empty_headers();
+        let err =
+            write_file_streamed_finishing(&out, header, mesh, &Freed, None, &|| false, || {
+                (0, [0; 32])
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("unit 1") && err.contains("cannot be filled"),
+            "{err}"
+        );
+        assert!(!out.exists(), "no output");
+    }
+
+    /// A file header with no mesh and a mesh header with nothing in it,
+    /// for f32 positions.
+    fn empty_headers() -> (Header, MeshHeader) {
         let header = Header {
             payload_offset: 0,
             payload_len: 0,
@@ -2150,16 +2199,87 @@ mod tests {
             },
             buckets: Vec::new(),
         };
-        let err =
-            write_file_streamed_finishing(&out, header, mesh, &Freed, None, &|| false, || {
-                (0, [0; 32])
-            })
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("unit 1") && err.contains("cannot be filled"),
-            "{err}"
-        );
-        assert!(!out.exists(), "no output");
+        (header, mesh)
+    }
+
+    /// `AheadFile::write_shared`: units taken by several calls, in any
+    /// split, go where one `write` puts them, with the same pieces.
+    /// Caught: each call's offsets counted from its first unit taken as if
+    /// it were unit 0 (the split calls wrote units 3.. over units 0..), a
+    /// unit's own length left out of the running offset, and units taken
+    /// twice (the counter read and then stepped apart: the pieces
+    /// differed).
+    #[test]
+    fn units_shared_by_calls_land_where_one_writer_puts_them() {
+        /// Units of 1 to 7 triangles (12 floats each), unit `u`'s floats
+        /// `u` plus their place; `units` of them.
+        struct Steps(usize);
+        impl PayloadSource for Steps {
+            fn units(&self) -> usize {
+                self.0
+            }
+            fn floats(&self, unit: usize, section: usize) -> usize {
+                if section == 0 { 12 * (unit + 1) } else { 0 }
+            }
+            fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
+                for (i, f) in outs[0].iter_mut().enumerate() {
+                    *f = (100 * unit + i) as f32;
+                }
+                // Let the other thread take units in between.
+                std::thread::sleep(std::time::Duration::from_micros(200));
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let (header, mut mesh) = empty_headers();
+        mesh.stats.triangles = (1..=7).sum();
+        let open = |name: &str| {
+            AheadFile::new(&dir.path().join(name), header.clone(), mesh.clone()).unwrap()
+        };
+        // The file's bytes and its pieces (unit, offset, length, CRC).
+        let written = |file: AheadFile| {
+            let w = file.finish();
+            let mut pieces: Vec<_> = w
+                .pieces
+                .iter()
+                .map(|p| (p.unit, p.section, p.at, p.len, p.crc.clone().finalize()))
+                .collect();
+            pieces.sort_unstable();
+            (std::fs::read(w.tmp.path()).unwrap(), pieces)
+        };
+        let mut bufs = UnitBuffers::new(12 * 7);
+        let one = open("one.svpk");
+        let at = one.caps_offset();
+        one.write(&Steps(7), 5, 0, at, &mut bufs, &|| false)
+            .unwrap();
+        let want = written(one);
+        assert_eq!(want.1.len(), 7);
+        assert_eq!(want.1[6].0, 11, "units numbered from first_unit");
+
+        // Units 3.. by one call, then 0..3 by another.
+        let split = open("split.svpk");
+        let next = std::sync::atomic::AtomicUsize::new(3);
+        split
+            .write_shared(&Steps(7), 5, 0, at, &next, &mut bufs, &|| false)
+            .unwrap();
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        split
+            .write_shared(&Steps(3), 5, 0, at, &next, &mut bufs, &|| false)
+            .unwrap();
+        assert!(written(split) == want, "split calls");
+
+        // Two threads at once.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let both = open("both.svpk");
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let call = || {
+            let mut bufs = UnitBuffers::new(12 * 7);
+            both.write_shared(&Steps(7), 5, 0, at, &next, &mut bufs, &|| false)
+        };
+        let (x, y) = pool.install(|| rayon::join(call, call));
+        x.and(y).unwrap();
+        assert!(written(both) == want, "two threads");
     }
 }

@@ -280,7 +280,7 @@ impl Plan {
     /// Writes caps block `blk`'s records into `out`
     /// ([`Plan::cap_block_floats`]`(blk)` floats).
     pub fn fill_caps(&self, welded: &Welded, blk: usize, out: &mut [f32]) {
-        fill_caps(welded, blk, out);
+        fill_caps(&welded.positions, &welded.triangles, blk, out);
     }
 }
 
@@ -501,12 +501,11 @@ fn cap_block_floats(triangles: usize, blk: usize) -> usize {
     (end - blk * BLOCK) * 12
 }
 
-/// Writes caps block `blk`'s records of `welded` into `out`
-/// ([`cap_block_floats`] floats).
-fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
-    let pos = &welded.positions[..];
-    let end = ((blk + 1) * BLOCK).min(welded.triangle_count());
-    let tris = &welded.triangles[3 * blk * BLOCK..3 * end];
+/// Writes caps block `blk`'s records of the welded mesh `pos`,
+/// `triangles` into `out` ([`cap_block_floats`] floats).
+fn fill_caps(pos: &[[f32; 3]], triangles: &[u32], blk: usize, out: &mut [f32]) {
+    let end = ((blk + 1) * BLOCK).min(triangles.len() / 3);
+    let tris = &triangles[3 * blk * BLOCK..3 * end];
     let ahead = tris.get(3 * AHEAD..).unwrap_or(&[]);
     for (i, (rec, c)) in out
         .chunks_exact_mut(12)
@@ -534,7 +533,8 @@ fn fill_caps(welded: &Welded, blk: usize, out: &mut [f32]) {
 /// caps block): what `format::AheadFile::write` writes while the edges are
 /// still being made, since the caps need only the welded mesh.
 pub struct CapsRecords<'a> {
-    welded: &'a Welded,
+    positions: &'a [[f32; 3]],
+    triangles: &'a [u32],
 }
 
 impl<'a> CapsRecords<'a> {
@@ -543,24 +543,34 @@ impl<'a> CapsRecords<'a> {
 
     /// The caps of `welded`.
     pub fn new(welded: &'a Welded) -> Self {
-        CapsRecords { welded }
+        Self::from_parts(&welded.positions, &welded.triangles)
+    }
+
+    /// The caps of the welded mesh with these `positions` and
+    /// `triangles`: for a build that shares the triangles with the
+    /// topology (`topology::build_edges_opposites_only_shared_fed`).
+    pub fn from_parts(positions: &'a [[f32; 3]], triangles: &'a [u32]) -> Self {
+        CapsRecords {
+            positions,
+            triangles,
+        }
     }
 }
 
 impl PayloadSource for CapsRecords<'_> {
     fn units(&self) -> usize {
-        self.welded.triangle_count().div_ceil(BLOCK)
+        (self.triangles.len() / 3).div_ceil(BLOCK)
     }
 
     fn floats(&self, unit: usize, section: usize) -> usize {
         match section {
-            0 => cap_block_floats(self.welded.triangle_count(), unit),
+            0 => cap_block_floats(self.triangles.len() / 3, unit),
             _ => 0,
         }
     }
 
     fn fill(&self, unit: usize, outs: &mut [&mut [f32]]) {
-        fill_caps(self.welded, unit, outs[0]);
+        fill_caps(self.positions, self.triangles, unit, outs[0]);
     }
 }
 
@@ -713,7 +723,9 @@ impl PayloadSource for PureSides<'_> {
 /// blocks' offsets are not known); once the emit has ended, what is left
 /// on both threads. The final writer keeps the blocks that went where
 /// the file puts them and writes the others again: if the guess was
-/// wrong, the whole copy is wasted.
+/// wrong, the whole copy is wasted. The side units follow the caps' of
+/// the mesh's `triangles` kept triangles; of `welded` only the positions
+/// are read (the triangles may be with the topology).
 ///
 /// Why: with two threads the side records' copy into the file (83 MB on
 /// the dragon) was one thread's work after the edges were made; buffered
@@ -722,6 +734,7 @@ impl PayloadSource for PureSides<'_> {
 pub fn write_sides_ahead(
     feed: &EmitFeed,
     welded: &Welded,
+    triangles: usize,
     max_mult: u32,
     file: &crate::format::AheadFile,
     side: &(dyn Fn() -> bool + Sync),
@@ -734,7 +747,7 @@ pub fn write_sides_ahead(
     // section 1 when it is the first bucket. Block b goes at b whole
     // blocks past the first bucket's start (every block but the last of
     // all is whole): 16 floats of 4 or 2 bytes per edge.
-    let first_unit = CapsRecords::new(welded).units();
+    let first_unit = triangles.div_ceil(BLOCK);
     let block_bytes = (BLOCK * 16) as u64 * (file.vec4_bytes() / 4);
     // With every edge pure, half as many edges as records.
     let sides_end =

@@ -15,7 +15,6 @@
 //! endpoint, a handful of records on real meshes (the vertex valence). See
 //! [`build_edges`].
 
-use std::borrow::Cow;
 use std::mem::MaybeUninit;
 
 #[cfg(target_arch = "x86_64")]
@@ -114,19 +113,21 @@ impl Edges {
 ///    listings, already read (8 or 12 bytes a listing, at most two records
 ///    of 4),
 ///    its triangles straight to their final place, and its edges one after
-///    the other from the group's first record's offset (edges never
-///    outnumber records). Where the CPU has AVX-512 and BMI2 (and the mesh
-///    fewer than 2^28 vertices), each listing is unpacked by one `pdep`
-///    (`sort_range_bmi2`) and a vertex with at most 8 listings (so at most
-///    16 records) is done in registers (`emit_range_avx512`, two vertices
-///    at a time where both have at most 4 listings): 14.5–15.0 →
+///    the other from the front of its arrays: the edges' own for the first
+///    group, arrays of its own sized for its records for each further one
+///    (edges never outnumber records). Where the CPU has AVX-512 and BMI2
+///    (and the mesh fewer than 2^28 vertices), each listing is unpacked by
+///    one `pdep` (`sort_range_bmi2`) and a vertex with at most 8 listings
+///    (so at most 16 records) is done in registers (`emit_range_avx512`,
+///    two vertices at a time where both have at most 4 listings): 14.5–15.0 →
 ///    7.1–7.6 ms on the dragon, one thread, on the earlier Intel host
 ///    (`cargo run --release --example stage_probe -- passes`, the two
 ///    versions alternated; 9.1–9.3 ms with the kernel for up to 8 records
 ///    only).
-/// 4. **Compact**: each group's opposite vertices and edges are moved down
-///    after the previous groups' (one move per group and array), and the
-///    listings' memory becomes `opp`.
+/// 4. **Compact**: each group's opposite vertices are moved down after the
+///    previous groups' (one move per group), each further group's edges
+///    are appended to the first group's (one copy per group and array),
+///    and the listings' memory becomes `opp`.
 ///
 /// Why not sort the 3·T half-edges themselves (the previous method, a
 /// two-level counting sort of 16-byte records, kept as a bench baseline):
@@ -152,6 +153,7 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
             Simd::Plain,
             false,
             None,
+            None,
         )
         .0
     })
@@ -163,7 +165,7 @@ pub fn build_edges(triangles: &[u32], vertex_count: usize) -> Edges {
 /// triangle) pair (60 MB on a 5M-triangle scene), all of it fresh pages,
 /// and one write per record less.
 pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edges {
-    opposites_only(triangles.into(), vertex_count, None).0
+    opposites_only(triangles.into(), vertex_count, None, None).0
 }
 
 /// [`build_edges_opposites_only`] on triangles it takes, and frees once
@@ -180,7 +182,7 @@ pub fn build_edges_opposites_only(triangles: &[u32], vertex_count: usize) -> Edg
 /// 5M scene's edges took 62.6–66.9 or 149.6–206.8 ms in eight one-thread
 /// builds (local timers), with the same page faults.
 pub fn build_edges_opposites_only_owned(triangles: Vec<u32>, vertex_count: usize) -> Edges {
-    opposites_only(triangles.into(), vertex_count, None).0
+    opposites_only(triangles.into(), vertex_count, None, None).0
 }
 
 /// [`build_edges_opposites_only`], with `consumer` reading the edges while
@@ -196,7 +198,37 @@ pub fn build_edges_opposites_only_fed(
     vertex_count: usize,
     consumer: &mut (dyn FnMut(&EmitFeed) + Send),
 ) -> Edges {
-    opposites_only(triangles.into(), vertex_count, Some(consumer)).0
+    opposites_only(triangles.into(), vertex_count, Some(consumer), None).0
+}
+
+/// [`build_edges_opposites_only_fed`] on triangles it shares with the
+/// caller, and drops once they are listed (pass 2), like
+/// [`build_edges_opposites_only_owned`] (they are freed once the caller
+/// has dropped its share too); after pass 1 it calls `counted` with
+/// whether the emit is fed (whether `consumer` will be called: not when
+/// some edge has an odd number of opposite vertices, see the passes).
+///
+/// Why: a two-thread build writes the caps from the welded triangles on
+/// the other thread, beside the topology (`build::build_mesh`). When the
+/// emit is fed, the side blocks follow them there; when it is not, the
+/// emit runs on both threads, and `counted` has this thread help with the
+/// caps first, so that both threads are free for the emit. Shared, the
+/// triangles are freed once both the topology and the caps are done with
+/// them, before the emit's arrays are allocated if the caps are written
+/// by then.
+pub fn build_edges_opposites_only_shared_fed(
+    triangles: std::sync::Arc<Vec<u32>>,
+    vertex_count: usize,
+    consumer: &mut (dyn FnMut(&EmitFeed) + Send),
+    counted: &mut (dyn FnMut(bool) + Send),
+) -> Edges {
+    opposites_only(
+        triangles.into(),
+        vertex_count,
+        Some(consumer),
+        Some(counted),
+    )
+    .0
 }
 
 /// [`build_edges_opposites_only`], with the wall time of each of its four
@@ -205,15 +237,16 @@ pub fn build_edges_opposites_only_timed(
     triangles: &[u32],
     vertex_count: usize,
 ) -> (Edges, PassTimes) {
-    opposites_only(triangles.into(), vertex_count, None)
+    opposites_only(triangles.into(), vertex_count, None, None)
 }
 
 /// The opposites-only edges with their passes' times, as one job on
 /// rayon's pool (see `crate::pool`).
 fn opposites_only(
-    triangles: Cow<'_, [u32]>,
+    triangles: Input<'_>,
     vertex_count: usize,
     consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
+    counted: Option<&mut (dyn FnMut(bool) + Send)>,
 ) -> (Edges, PassTimes) {
     crate::pool::one_job(|| {
         let chunks = chunks_for(&triangles);
@@ -224,6 +257,7 @@ fn opposites_only(
             simd_level(),
             false,
             consumer,
+            counted,
         )
     })
 }
@@ -241,6 +275,44 @@ pub struct PassTimes {
     pub compact: std::time::Duration,
 }
 
+/// The triangles the topology reads in passes 1 and 2 and drops after
+/// them: borrowed, its own (freed then), or shared with the caller (freed
+/// once the caller has dropped its share too).
+enum Input<'a> {
+    Borrowed(&'a [u32]),
+    Owned(Vec<u32>),
+    Shared(std::sync::Arc<Vec<u32>>),
+}
+
+impl std::ops::Deref for Input<'_> {
+    type Target = [u32];
+    fn deref(&self) -> &[u32] {
+        match self {
+            Input::Borrowed(t) => t,
+            Input::Owned(t) => t,
+            Input::Shared(t) => t,
+        }
+    }
+}
+
+impl<'a> From<&'a [u32]> for Input<'a> {
+    fn from(t: &'a [u32]) -> Self {
+        Input::Borrowed(t)
+    }
+}
+
+impl From<Vec<u32>> for Input<'_> {
+    fn from(t: Vec<u32>) -> Self {
+        Input::Owned(t)
+    }
+}
+
+impl From<std::sync::Arc<Vec<u32>>> for Input<'_> {
+    fn from(t: std::sync::Arc<Vec<u32>>) -> Self {
+        Input::Shared(t)
+    }
+}
+
 /// Chunks of the count and list passes: one per thread for large inputs.
 fn chunks_for(triangles: &[u32]) -> usize {
     if triangles.len() < 3 * PARALLEL_MIN {
@@ -256,12 +328,13 @@ fn chunks_for(triangles: &[u32]) -> usize {
 /// each), and the passes' times. The public entry points run it as one
 /// job on rayon's pool (see `crate::pool`).
 fn build_edges_in<const TRI: bool>(
-    input: Cow<'_, [u32]>,
+    input: Input<'_>,
     vertex_count: usize,
     chunks: usize,
     simd: Simd,
     wide: bool,
     consumer: Option<&mut (dyn FnMut(&EmitFeed) + Send)>,
+    on_counted: Option<&mut (dyn FnMut(bool) + Send)>,
 ) -> (Edges, PassTimes) {
     use rayon::prelude::*;
     use std::time::Instant;
@@ -302,6 +375,9 @@ fn build_edges_in<const TRI: bool>(
         })
         .collect();
     let consumer = consumer.filter(|_| odd_edges.into_inner() == 0);
+    if let Some(on_counted) = on_counted {
+        on_counted(consumer.is_some());
+    }
     // Where each range's listings and records start.
     let mut list_start = vec![0u32; ranges + 1];
     let mut rec_start = vec![0usize; ranges + 1];
@@ -435,23 +511,32 @@ fn build_edges_in<const TRI: bool>(
     // scratch) before its records are written, so a group's writes never
     // reach a listing it has not read, nor another group's listings.
     //
-    // One group writes its edges from the front, as many as there are
-    // edges: half the records on a closed mesh, a little more with open
-    // edges. Kept memory goes to that front (`alloc::vec_touching`), with
-    // room for open edges up to a sixteenth of the records; several groups
-    // write at their records' offsets, all through the arrays.
-    let touched = if groups == 1 {
-        n / 2 + n / 32 + 1
-    } else {
-        n + 1
-    };
+    // The first group writes its edges from the front of `a`, `b` and
+    // `opp_start`, as many as there are edges: half the records on a
+    // closed mesh, a little more with open edges. Kept memory goes to that
+    // front (`alloc::vec_touching`), with room for open edges up to a
+    // sixteenth of the records. Each further group writes its edges from
+    // the front of arrays of its own (`spill`), sized for its records with
+    // the same room, and pass 4 appends them. Why not at their records'
+    // offsets in the shared arrays, as until the sixty-fifth round: the
+    // written parts were then spread over the whole arrays, so kept
+    // memory had to cover all of them or leave the fronts fresh.
+    let front = |m: usize| m / 2 + m / 32 + 1;
+    let group_records = |g: usize| rec_start[group_start[g + 1]] - rec_start[group_start[g]];
+    let first = front(group_records(0));
     let mut e = Edges {
-        a: crate::alloc::vec_touching(n, touched),
-        b: crate::alloc::vec_touching(n, touched),
-        opp_start: crate::alloc::vec_touching(n + 1, touched),
+        a: crate::alloc::vec_touching(n, first),
+        b: crate::alloc::vec_touching(n, first),
+        opp_start: crate::alloc::vec_touching(n + 1, first),
         opp: Vec::new(),
         opp_tri: Vec::with_capacity(if TRI { n } else { 0 }),
     };
+    let mut spill: Vec<[Vec<u32>; 3]> = (1..groups)
+        .map(|g| {
+            let m = group_records(g);
+            std::array::from_fn(|_| crate::alloc::vec_touching(m, front(m)))
+        })
+        .collect();
     // Where each group's records are written: the start of its listings,
     // in u32 (`words` per listing).
     let records_at = |g: usize| words * list_start[group_start[g]] as usize;
@@ -459,27 +544,33 @@ fn build_edges_in<const TRI: bool>(
         debug_assert!(!TRI, "fed emits are opposites-only");
         vec![emit_fed(&mut e, n, &buckets, vertex_count, simd, consumer)]
     } else {
-        let rt = &mut e.opp_tri.spare_capacity_mut()[..if TRI { n } else { 0 }];
-        let (ra, rb) = (
-            &mut e.a.spare_capacity_mut()[..n],
-            &mut e.b.spare_capacity_mut()[..n],
-        );
+        let mut rt = &mut e.opp_tri.spare_capacity_mut()[..if TRI { n } else { 0 }];
         // `opp_start[0]` goes to the first group: written here, its first
         // touch of a fresh huge page was 0.26 ms before any group started, with
         // two threads on the dragon (local timers).
-        let (mut rs0, rs) = e.opp_start.spare_capacity_mut()[..n + 1].split_at_mut(1);
+        let (rs0, rs) = e.opp_start.spare_capacity_mut()[..n + 1].split_at_mut(1);
+        let m = group_records(0);
+        let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
+        rt = t2;
         let mut jobs = Vec::with_capacity(groups);
-        {
-            let (mut rt, mut ra, mut rb, mut rs) = (rt, ra, rb, rs);
-            for g in 0..groups {
-                let m = rec_start[group_start[g + 1]] - rec_start[group_start[g]];
-                let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
-                let (a1, a2) = ra.split_at_mut(m);
-                let (b1, b2) = rb.split_at_mut(m);
-                let (s1, s2) = rs.split_at_mut(m);
-                jobs.push([std::mem::take(&mut rs0), t1, a1, b1, s1]);
-                (rt, ra, rb, rs) = (t2, a2, b2, s2);
-            }
+        jobs.push([
+            rs0,
+            t1,
+            &mut e.a.spare_capacity_mut()[..m],
+            &mut e.b.spare_capacity_mut()[..m],
+            &mut rs[..m],
+        ]);
+        for (g, [sa, sb, ss]) in spill.iter_mut().enumerate() {
+            let m = group_records(g + 1);
+            let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
+            rt = t2;
+            jobs.push([
+                Default::default(),
+                t1,
+                &mut sa.spare_capacity_mut()[..m],
+                &mut sb.spare_capacity_mut()[..m],
+                &mut ss.spare_capacity_mut()[..m],
+            ]);
         }
         jobs.into_par_iter()
             .enumerate()
@@ -525,11 +616,11 @@ fn build_edges_in<const TRI: bool>(
     // Pass 4: each group's records moved down from its listings to follow
     // the previous groups' (records never outnumber twice the listings
     // before them, so a move only overwrites listings already moved or
-    // read), and each group's edges moved down to follow the previous
-    // groups' (in order, so a move never overwrites edges not yet moved).
-    // The four arrays are independent, so their moves run side by side:
-    // with one group per thread there is one move per array and thread
-    // after the first (45 MB on a 5M-triangle scene with two threads).
+    // read), and each further group's edges copied from its own arrays to
+    // follow the previous groups'. The four arrays are independent, so
+    // their moves run side by side: with one group per thread there is
+    // one move per array and thread after the first (45 MB on a
+    // 5M-triangle scene with two threads).
     let move_records = || {
         for g in 0..groups {
             let (from, to) = (records_at(g), rec_start[group_start[g]]);
@@ -548,16 +639,24 @@ fn build_edges_in<const TRI: bool>(
             }
         }
     };
-    // Moves one edge array's groups down; `shift` is 1 for `opp_start`,
-    // whose first entry is not a group's.
-    let move_edges = |v: &mut [MaybeUninit<u32>], shift: usize| {
-        let mut at = 0;
-        for (g, &ne) in group_edges.iter().enumerate() {
-            let from = rec_start[group_start[g]];
-            if from != at {
-                v.copy_within(shift + from..shift + from + ne, shift + at);
+    // SAFETY: each further group wrote the first of its edges' count into
+    // each of its arrays.
+    for (arrays, &ne) in spill.iter_mut().zip(&group_edges[1..]) {
+        for v in arrays {
+            unsafe { v.set_len(ne) };
+        }
+    }
+    // Appends the further groups' edges in array `which` (0 for `a`, 1 for
+    // `b`, 2 for `opp_start`) to the first group's in `v`; `shift` is 1
+    // for `opp_start`, whose first entry is not a group's.
+    let move_edges = |v: &mut [MaybeUninit<u32>], shift: usize, which: usize| {
+        let mut at = shift + group_edges[0];
+        for arrays in &spill {
+            let from = &arrays[which];
+            for (to, &x) in v[at..at + from.len()].iter_mut().zip(from) {
+                *to = MaybeUninit::new(x);
             }
-            at += ne;
+            at += from.len();
         }
     };
     {
@@ -567,10 +666,11 @@ fn build_edges_in<const TRI: bool>(
             e.opp_start.spare_capacity_mut(),
         );
         rayon::join(
-            || rayon::join(move_records, || move_edges(va, 0)),
-            || rayon::join(|| move_edges(vb, 0), || move_edges(vs, 1)),
+            || rayon::join(move_records, || move_edges(va, 0, 0)),
+            || rayon::join(|| move_edges(vb, 0, 1), || move_edges(vs, 1, 2)),
         );
     }
+    drop(spill);
     let list = std::mem::ManuallyDrop::new(list);
     // SAFETY: `list`'s first `n` u32 are the records, all written
     // (asserted per group) and moved into place.
@@ -2730,6 +2830,7 @@ mod tests {
                     Simd::Plain,
                     wide,
                     None,
+                    None,
                 )
                 .0,
                 &expected,
@@ -2743,6 +2844,7 @@ mod tests {
                         chunks,
                         simd,
                         wide,
+                        None,
                         None,
                     )
                     .0,
@@ -2780,7 +2882,16 @@ mod tests {
         assert_eq!(build_edges(&[], 0), naive(&[]));
         assert_eq!(build_edges_opposites_only(&[], 5), naive(&[]));
         assert_eq!(
-            build_edges_in::<true>((&tris[..3]).into(), vertices, 4, Simd::Plain, false, None).0,
+            build_edges_in::<true>(
+                (&tris[..3]).into(),
+                vertices,
+                4,
+                Simd::Plain,
+                false,
+                None,
+                None
+            )
+            .0,
             naive(&tris[..3])
         );
     }
@@ -3086,6 +3197,56 @@ mod tests {
                     assert!(s[..] == want.opp_start[..=*done], "opp_start, {done} edges");
                     assert!(o[..] == want.opp[..o.len()], "opp, {done} edges");
                 }
+            }
+        }
+    }
+
+    /// `build_edges_opposites_only_shared_fed`: `counted` is called once,
+    /// before any edge is handed out, with whether the emit is fed; the
+    /// topology's share of the triangles is dropped once they are listed,
+    /// before the emit (the consumer sees the caller's share alone); the
+    /// edges are the plain ones, with one thread or two (two emit groups
+    /// when not fed). Caught: `counted` called after the emit (the fed
+    /// soup's consumer ran first), with the flag before the parity check
+    /// (true for the odd soup), and the triangles kept to the end (two
+    /// shares in the consumer).
+    #[test]
+    fn shared_triangles_are_dropped_once_listed_and_counted_is_told_if_fed() {
+        let vertices = 5 * RANGE + 11;
+        let odd = strip_soup(vertices, 60_000, 0x2545_f491_4f6c_dd1d);
+        let even: Vec<u32> = odd
+            .chunks_exact(3)
+            .flat_map(|t| [t[0], t[1], t[2], t[2], t[1], t[0]])
+            .collect();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for (tris, fed) in [(&even, true), (&odd, false)] {
+                let what = format!("{threads} threads, fed {fed}");
+                let want = build_edges_opposites_only(tris, vertices);
+                let mine = std::sync::Arc::new(tris.clone());
+                let events = std::sync::Mutex::new(Vec::new());
+                let got = pool.install(|| {
+                    build_edges_opposites_only_shared_fed(
+                        mine.clone(),
+                        vertices,
+                        &mut |feed: &EmitFeed| {
+                            let shares = std::sync::Arc::strong_count(&mine);
+                            events.lock().unwrap().push(format!("fed, {shares} shares"));
+                            feed.wait(feed.records(), &|| false);
+                        },
+                        &mut |f| events.lock().unwrap().push(format!("counted {f}")),
+                    )
+                });
+                same_edges(&got, &want, &what);
+                let mut want_events = vec![format!("counted {fed}")];
+                if fed {
+                    want_events.push("fed, 1 shares".into());
+                }
+                assert_eq!(events.into_inner().unwrap(), want_events, "{what}");
+                assert_eq!(std::sync::Arc::strong_count(&mine), 1, "{what}");
             }
         }
     }
