@@ -1220,7 +1220,7 @@ impl AheadFile {
     /// units of `source` one at a time, the next not yet taken (counted
     /// by `next`, from 0), and returns when none is left; each unit goes
     /// where [`AheadFile::write`] puts it. Why: a thread that would wait
-    /// for the other's copy helps with it (`build::build_mesh`).
+    /// for the other's copy helps with it (`build::build_file`).
     #[allow(clippy::too_many_arguments)]
     pub fn write_shared(
         &self,

@@ -209,7 +209,7 @@ pub fn build_edges_opposites_only_fed(
 /// some edge has an odd number of opposite vertices, see the passes).
 ///
 /// Why: a two-thread build writes the caps from the welded triangles on
-/// the other thread, beside the topology (`build::build_mesh`). When the
+/// the other thread, beside the topology (`build::build_file`). When the
 /// emit is fed, the side blocks follow them there; when it is not, the
 /// emit runs on both threads, and `counted` has this thread help with the
 /// caps first, so that both threads are free for the emit. Shared, the
@@ -520,7 +520,12 @@ fn build_edges_in<const TRI: bool>(
     // the same room, and pass 4 appends them. Why not at their records'
     // offsets in the shared arrays, as until the sixty-fifth round: the
     // written parts were then spread over the whole arrays, so kept
-    // memory had to cover all of them or leave the fronts fresh.
+    // memory had to cover all of them or leave the fronts fresh. Why the
+    // first group's front is its own edges', not all the edges': pass 4
+    // writes the rest, on every thread, while a front for all of them
+    // took the kept memory the further groups' arrays then lacked (on the
+    // 5M scene with two threads, the second group's emit 79.8 ms against
+    // the first's 35.1 in a trace; benches/ROUNDS.md, Sixty-fifth round).
     let front = |m: usize| m / 2 + m / 32 + 1;
     let group_records = |g: usize| rec_start[group_start[g + 1]] - rec_start[group_start[g]];
     let first = front(group_records(0));
@@ -639,8 +644,8 @@ fn build_edges_in<const TRI: bool>(
             }
         }
     };
-    // SAFETY: each further group wrote the first of its edges' count into
-    // each of its arrays.
+    // SAFETY: each further group wrote the first `ne` slots (its edges)
+    // of each of its arrays.
     for (arrays, &ne) in spill.iter_mut().zip(&group_edges[1..]) {
         for v in arrays {
             unsafe { v.set_len(ne) };
@@ -3139,6 +3144,19 @@ mod tests {
         );
     }
 
+    /// A vertex count, a strip soup over it with some edges on an odd
+    /// number of triangles, and the same with every triangle twice (the
+    /// second reversed), so every fan even.
+    fn odd_and_even_soups() -> (usize, Vec<u32>, Vec<u32>) {
+        let vertices = 5 * RANGE + 11;
+        let odd = strip_soup(vertices, 60_000, 0x2545_f491_4f6c_dd1d);
+        let even = odd
+            .chunks_exact(3)
+            .flat_map(|t| [t[0], t[1], t[2], t[2], t[1], t[0]])
+            .collect();
+        (vertices, odd, even)
+    }
+
     /// The fed emit (`build_edges_opposites_only_fed`): every prefix the
     /// consumer is handed, read while the rest is being made, is the final
     /// edges' prefix, and the edges are the unfed ones; a mesh with an edge
@@ -3148,13 +3166,7 @@ mod tests {
     /// pass 1 (the odd soup fed).
     #[test]
     fn fed_emit_hands_out_final_prefixes_and_only_for_even_fans() {
-        let vertices = 5 * RANGE + 11;
-        let odd = strip_soup(vertices, 60_000, 0x2545_f491_4f6c_dd1d);
-        // Every triangle twice (the second reversed): every fan even.
-        let even: Vec<u32> = odd
-            .chunks_exact(3)
-            .flat_map(|t| [t[0], t[1], t[2], t[2], t[1], t[0]])
-            .collect();
+        let (vertices, odd, even) = odd_and_even_soups();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(2)
             .build()
@@ -3201,23 +3213,18 @@ mod tests {
         }
     }
 
-    /// `build_edges_opposites_only_shared_fed`: `counted` is called once,
+    /// `build_edges_opposites_only_shared_fed`: its hook is called once,
     /// before any edge is handed out, with whether the emit is fed; the
     /// topology's share of the triangles is dropped once they are listed,
     /// before the emit (the consumer sees the caller's share alone); the
     /// edges are the plain ones, with one thread or two (two emit groups
-    /// when not fed). Caught: `counted` called after the emit (the fed
+    /// when not fed). Caught: the hook called after the emit (the fed
     /// soup's consumer ran first), with the flag before the parity check
     /// (true for the odd soup), and the triangles kept to the end (two
     /// shares in the consumer).
     #[test]
     fn shared_triangles_are_dropped_once_listed_and_counted_is_told_if_fed() {
-        let vertices = 5 * RANGE + 11;
-        let odd = strip_soup(vertices, 60_000, 0x2545_f491_4f6c_dd1d);
-        let even: Vec<u32> = odd
-            .chunks_exact(3)
-            .flat_map(|t| [t[0], t[1], t[2], t[2], t[1], t[0]])
-            .collect();
+        let (vertices, odd, even) = odd_and_even_soups();
         for threads in [1, 2] {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)

@@ -29,6 +29,29 @@ fn build(
         .install(|| build_file(input, out, cfg).unwrap())
 }
 
+/// Builds `input` in `dir` with one thread, then with two and three,
+/// asserting the same bytes each time; the one-thread build's summary.
+fn same_bytes_with_more_threads(
+    dir: &Path,
+    input: &Path,
+    cfg: &BuildConfig,
+    what: &str,
+) -> svpack::build::BuildOutput {
+    let one = dir.join("one.svpk");
+    let summary = build(input, &one, 1, cfg);
+    let want = std::fs::read(&one).unwrap();
+    for threads in [2, 3] {
+        let out = dir.join(format!("t{threads}.svpk"));
+        build(input, &out, threads, cfg);
+        let got = std::fs::read(&out).unwrap();
+        assert!(
+            got == want,
+            "{what}, {threads} threads: the bytes differ from one thread's"
+        );
+    }
+    summary
+}
+
 /// Caught: every piece written ahead kept, whether or not it went where
 /// the file puts it (the fan-6 torus's two-thread file differed from the
 /// one-thread one: its first bucket is bucket 1, so every side block
@@ -58,24 +81,14 @@ fn side_blocks_written_ahead_give_the_one_thread_bytes() {
                 positions,
                 ..BuildConfig::default()
             };
-            let one = tmp.path().join("one.svpk");
-            let summary = build(&input, &one, 1, &cfg);
+            let what = format!("{pages} pages at {at}, {positions:?}");
+            let summary = same_bytes_with_more_threads(tmp.path(), &input, &cfg, &what);
             let ks: Vec<u32> = summary.header.meshes[0]
                 .buckets
                 .iter()
                 .map(|b| b.k)
                 .collect();
-            assert_eq!(ks, buckets, "{pages} pages at {at}: buckets");
-            let want = std::fs::read(&one).unwrap();
-            for threads in [2, 3] {
-                let out = tmp.path().join(format!("t{threads}.svpk"));
-                build(&input, &out, threads, &cfg);
-                let got = std::fs::read(&out).unwrap();
-                assert!(
-                    got == want,
-                    "{pages} pages at {at}, {positions:?}, {threads} threads: the bytes differ from one thread's"
-                );
-            }
+            assert_eq!(ks, buckets, "{what}: buckets");
         }
     }
 }
@@ -110,21 +123,11 @@ fn an_open_mesh_built_by_several_threads_gives_the_one_thread_bytes() {
             positions,
             ..BuildConfig::default()
         };
-        let one = tmp.path().join("one.svpk");
-        let summary = build(&input, &one, 1, &cfg);
+        let what = format!("{positions:?}");
+        let summary = same_bytes_with_more_threads(tmp.path(), &input, &cfg, &what);
         assert_eq!(
             summary.header.meshes[0].buckets[0].k, 1,
-            "open edges (bucket 1)"
+            "{what}: open edges (bucket 1)"
         );
-        let want = std::fs::read(&one).unwrap();
-        for threads in [2, 3] {
-            let out = tmp.path().join(format!("t{threads}.svpk"));
-            build(&input, &out, threads, &cfg);
-            let got = std::fs::read(&out).unwrap();
-            assert!(
-                got == want,
-                "{positions:?}, {threads} threads: the bytes differ from one thread's"
-            );
-        }
     }
 }
