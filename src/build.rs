@@ -561,7 +561,7 @@ fn build_file_stages(
     // mesh's are not).
     if let (Some(file), false) = (&ahead_file, two_threads) {
         let caps = layout::SoupCaps::new(&soup.positions, &soup.indices, &welded);
-        write_caps_ahead(file, &caps, &digest)?;
+        write_caps_ahead(file, &caps, &digest, &Default::default())?;
     }
     // What the rest of the build does not read is freed before topology
     // allocates, which then reuses those pages: the soup (the welded mesh
@@ -602,17 +602,7 @@ fn build_file_stages(
             return Ok(());
         };
         let caps = layout::CapsRecords::from_parts(&welded.positions, &triangles);
-        let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
-        let step = || digest.step();
-        let copied = file.write_shared(
-            &caps,
-            0,
-            0,
-            file.caps_offset(),
-            &caps_next,
-            &mut bufs,
-            &step,
-        );
+        let copied = write_caps_ahead(file, &caps, &digest, &caps_next);
         *lock() = None;
         copied
     };
@@ -651,12 +641,7 @@ fn build_file_stages(
             }
             _ => topology::build_edges_opposites_only(&welded.triangles, welded.positions.len()),
         },
-        || {
-            ahead_file.as_ref().filter(|_| two_threads).map(|file| {
-                file.reserve(0, file.sides_offset())?;
-                copy_caps(file)
-            })
-        },
+        || ahead_file.as_ref().filter(|_| two_threads).map(&copy_caps),
     );
     caps_ahead.transpose()?;
     helped?;
@@ -741,16 +726,20 @@ fn build_file_stages(
 }
 
 /// Writes `caps` (one section, the units of `layout::CapsRecords`) into
-/// `file` where its caps go, its blocks up to the sides reserved first; a
-/// wait for the file hashes more of `digest`.
+/// `file` where its caps go, its blocks up to the sides reserved first;
+/// the units are taken from `next` (`format::AheadFile::write_shared`:
+/// other threads may be writing the same caps). A wait for the file
+/// hashes more of `digest`.
 fn write_caps_ahead(
     file: &format::AheadFile,
     caps: &dyn format::PayloadSource,
     digest: &load::DigestSlices,
+    next: &std::sync::atomic::AtomicUsize,
 ) -> Result<()> {
     file.reserve(0, file.sides_offset())?;
     let mut bufs = format::UnitBuffers::new(layout::CapsRecords::UNIT_FLOATS);
-    file.write(caps, 0, 0, file.caps_offset(), &mut bufs, &|| digest.step())
+    let step = || digest.step();
+    file.write_shared(caps, 0, 0, file.caps_offset(), next, &mut bufs, &step)
 }
 
 /// The generator string written into headers: "svpack" and the crate version.
