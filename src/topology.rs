@@ -113,9 +113,9 @@ impl Edges {
 ///    listings, already read (8 or 12 bytes a listing, at most two records
 ///    of 4),
 ///    its triangles straight to their final place, and its edges one after
-///    the other from the front of its arrays: the edges' own for the first
-///    group, arrays of its own sized for its records for each further one
-///    (edges never outnumber records). Where the CPU has AVX-512 and BMI2
+///    the other into its own slots of the edge arrays (half its records and
+///    a sixteenth more; all that is left for the last group) and, when these
+///    run out, into arrays of its own. Where the CPU has AVX-512 and BMI2
 ///    (and the mesh fewer than 2^28 vertices), each listing is unpacked by
 ///    one `pdep` (`sort_range_bmi2`) and a vertex with at most 8 listings
 ///    (so at most 16 records) is done in registers (`emit_range_avx512`,
@@ -126,8 +126,9 @@ impl Edges {
 ///    only).
 /// 4. **Compact**: each group's opposite vertices are moved down after the
 ///    previous groups' (one move per group), each further group's edges
-///    are appended to the first group's (one copy per group and array),
-///    and the listings' memory becomes `opp`.
+///    are moved from its slots to follow the previous groups' (one move
+///    per group and array, within memory pass 3 wrote), with the edges it
+///    had no slots for after them, and the listings' memory becomes `opp`.
 ///
 /// Why not sort the 3·T half-edges themselves (the previous method, a
 /// two-level counting sort of 16-byte records, kept as a bench baseline):
@@ -467,6 +468,7 @@ fn build_edges_in<const TRI: bool>(
     }
     let buckets = Buckets {
         start: &list_start,
+        records: &rec_start,
         at: list_at,
         tri: list_t_at,
         bits,
@@ -478,9 +480,11 @@ fn build_edges_in<const TRI: bool>(
     // job per group of consecutive ranges, the groups holding about equal
     // numbers of records (one group per thread: within a group, edges are
     // written one after the other). A group's records go to their final
-    // place in `opp` and `opp_tri`; its edges (no more than its records) to
-    // the same offsets in `a`, `b` and `opp_start`, sized for records, and
-    // are moved down to their final place afterwards (pass 4).
+    // place in `opp_tri` and over its own listings (moved to their final
+    // place in pass 4); its edges to its own slots in `a`, `b` and
+    // `opp_start` (past its first entry), then, if they run out, to
+    // arrays of its own (`Overflow`); pass 4 closes the gaps between the
+    // groups' edges.
     let n = rec_start[ranges];
     // Fed (`consumer`): one group, emitted in order, so that every edge
     // and record is written straight to its final place and a finished
@@ -498,9 +502,9 @@ fn build_edges_in<const TRI: bool>(
     }
     group_start[groups] = ranges;
     // Uninitialised, like the lists: the records fill `opp_tri` exactly
-    // (checked per group below), and the edges the front of each group's
-    // range in `a`, `b` and `opp_start`, which pass 4 joins up; only what is
-    // written is kept.
+    // (checked per group below), and each group's edges the front of its
+    // slots in `a`, `b` and `opp_start`, which pass 4 joins up; only what
+    // is written is kept.
     //
     // `opp` has no memory of its own: each group writes its records over
     // its own listings, from their start, and pass 4 moves them down to
@@ -511,71 +515,70 @@ fn build_edges_in<const TRI: bool>(
     // scratch) before its records are written, so a group's writes never
     // reach a listing it has not read, nor another group's listings.
     //
-    // The first group writes its edges from the front of `a`, `b` and
-    // `opp_start`, as many as there are edges: half the records on a
-    // closed mesh, a little more with open edges. Kept memory goes to that
-    // front (`alloc::vec_touching`), with room for open edges up to a
-    // sixteenth of the records. Each further group writes its edges from
-    // the front of arrays of its own (`spill`), sized for its records with
-    // the same room, and pass 4 appends them. Why not at their records'
-    // offsets in the shared arrays, as until the sixty-fifth round: the
-    // written parts were then spread over the whole arrays, so kept
-    // memory had to cover all of them or leave the fronts fresh. Why the
-    // first group's front is its own edges', not all the edges': pass 4
-    // writes the rest, on every thread, while a front for all of them
-    // took the kept memory the further groups' arrays then lacked (on the
-    // 5M scene with two threads, the second group's emit 79.8 ms against
-    // the first's 35.1 in a trace; benches/ROUNDS.md, Sixty-fifth round).
-    let front = |m: usize| m / 2 + m / 32 + 1;
+    // Each group but the last has `slots(m)` slots for its `m` records:
+    // room for half of them (every edge of a closed mesh is on two
+    // triangles) and for open edges up to a sixteenth more. The last
+    // group has the rest of the arrays, sized for all the records, so it
+    // never runs out (nor does a lone group). The slots follow each
+    // other, so the written edges are the whole arrays but for a gap of
+    // about a sixteenth of a group's records after each group, and kept
+    // memory goes to that front (`alloc::vec_touching`). Pass 4 moves
+    // each further group's edges across the gaps before it, within
+    // memory already written.
+    //
+    // Why not, as until the sixty-fifth round, the edges of each further
+    // group at their records' offsets (the written parts spread over the
+    // arrays, so kept memory had to cover them all or leave fronts fresh),
+    // or, in the sixty-fifth round, in arrays of its own appended in pass
+    // 4 (the appended edges went to fresh memory: pass 4 took 20.4–44.8 ms
+    // on the 5M scene with two threads, and the second group's emit, into
+    // its fresh arrays, 34.2–67.7 ms against the first's 24.3–25.9, in
+    // three traces; benches/ROUNDS.md, Sixty-sixth round).
+    let slots = |m: usize| m / 2 + m / 32 + 1;
     let group_records = |g: usize| rec_start[group_start[g + 1]] - rec_start[group_start[g]];
-    let first = front(group_records(0));
+    // Where each group's slots start, and the arrays' length.
+    let mut slot_start = vec![0usize; groups + 1];
+    for g in 0..groups - 1 {
+        slot_start[g + 1] = slot_start[g] + slots(group_records(g));
+    }
+    let len = n.max(slot_start[groups - 1] + group_records(groups - 1));
+    slot_start[groups] = len;
+    let touched = slot_start[groups - 1] + slots(group_records(groups - 1));
     let mut e = Edges {
-        a: crate::alloc::vec_touching(n, first),
-        b: crate::alloc::vec_touching(n, first),
-        opp_start: crate::alloc::vec_touching(n + 1, first),
+        a: crate::alloc::vec_touching(len, touched),
+        b: crate::alloc::vec_touching(len, touched),
+        opp_start: crate::alloc::vec_touching(len + 1, touched + 1),
         opp: Vec::new(),
         opp_tri: Vec::with_capacity(if TRI { n } else { 0 }),
     };
-    let mut spill: Vec<[Vec<u32>; 3]> = (1..groups)
-        .map(|g| {
-            let m = group_records(g);
-            std::array::from_fn(|_| crate::alloc::vec_touching(m, front(m)))
-        })
-        .collect();
     // Where each group's records are written: the start of its listings,
     // in u32 (`words` per listing).
     let records_at = |g: usize| words * list_start[group_start[g]] as usize;
-    let group_edges: Vec<usize> = if let Some(consumer) = consumer {
+    // Per group, the edges written in its slots and the ones past them.
+    let group_edges: Vec<(usize, Overflow)> = if let Some(consumer) = consumer {
         debug_assert!(!TRI, "fed emits are opposites-only");
-        vec![emit_fed(&mut e, n, &buckets, vertex_count, simd, consumer)]
+        let edges = emit_fed(&mut e, n, &buckets, vertex_count, simd, consumer);
+        vec![(edges, Overflow::default())]
     } else {
         let mut rt = &mut e.opp_tri.spare_capacity_mut()[..if TRI { n } else { 0 }];
         // `opp_start[0]` goes to the first group: written here, its first
         // touch of a fresh huge page was 0.26 ms before any group started, with
         // two threads on the dragon (local timers).
-        let (rs0, rs) = e.opp_start.spare_capacity_mut()[..n + 1].split_at_mut(1);
-        let m = group_records(0);
-        let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
-        rt = t2;
+        let (rs0, mut rs) = e.opp_start.spare_capacity_mut()[..len + 1].split_at_mut(1);
+        let (mut ra, mut rb) = (
+            &mut e.a.spare_capacity_mut()[..len],
+            &mut e.b.spare_capacity_mut()[..len],
+        );
         let mut jobs = Vec::with_capacity(groups);
-        jobs.push([
-            rs0,
-            t1,
-            &mut e.a.spare_capacity_mut()[..m],
-            &mut e.b.spare_capacity_mut()[..m],
-            &mut rs[..m],
-        ]);
-        for (g, [sa, sb, ss]) in spill.iter_mut().enumerate() {
-            let m = group_records(g + 1);
-            let (t1, t2) = rt.split_at_mut(if TRI { m } else { 0 });
-            rt = t2;
-            jobs.push([
-                Default::default(),
-                t1,
-                &mut sa.spare_capacity_mut()[..m],
-                &mut sb.spare_capacity_mut()[..m],
-                &mut ss.spare_capacity_mut()[..m],
-            ]);
+        let mut zero = Some(rs0);
+        for g in 0..groups {
+            let k = slot_start[g + 1] - slot_start[g];
+            let (t1, t2) = rt.split_at_mut(if TRI { group_records(g) } else { 0 });
+            let (a1, a2) = ra.split_at_mut(k);
+            let (b1, b2) = rb.split_at_mut(k);
+            let (s1, s2) = rs.split_at_mut(k);
+            (rt, ra, rb, rs) = (t2, a2, b2, s2);
+            jobs.push((zero.take().unwrap_or_default(), [t1, a1, b1, s1]));
         }
         jobs.into_par_iter()
             .enumerate()
@@ -583,17 +586,16 @@ fn build_edges_in<const TRI: bool>(
                 // (A split's span lasts as long as its scratch.)
                 || (Scratch::new(), crate::trace::span("topology: emit (part)")),
                 |(scratch, _part): &mut (Scratch, crate::trace::Span),
-                 (g, [zero, ot, oa, ob, os])| {
+                 (g, (zero, [ot, oa, ob, os]))| {
                     if let [z] = zero {
                         *z = MaybeUninit::new(0);
                     }
                     let first = group_start[g] * RANGE;
                     let last = (group_start[g + 1] * RANGE).min(vertex_count);
-                    let m = oa.len();
                     let out = GroupOut {
-                        // SAFETY (of the writes through it): the group's first `m`
-                        // u32 from here lie inside its listings (see where `e` is
-                        // made), which only this job touches.
+                        // SAFETY (of the writes through it): the group's
+                        // records from here lie inside its listings (see
+                        // where `e` is made), which only this job touches.
                         opp: (list_at as *mut u32).wrapping_add(records_at(g)),
                         tri: ot,
                         a: oa,
@@ -604,12 +606,19 @@ fn build_edges_in<const TRI: bool>(
                         records: 0,
                         edges: 0,
                     };
-                    let (records, edges) =
-                        emit_ranges::<TRI>(out, &buckets, first..last, scratch, simd);
-                    // The group's records filled its `m` slots (and its range of
-                    // `opp_tri`): pass 1 counted them.
-                    assert_eq!(records, m, "topology: records miscounted");
-                    edges
+                    let mut over = Overflow::default();
+                    let (records, edges) = emit_ranges::<TRI>(
+                        out,
+                        &buckets,
+                        first..last,
+                        scratch,
+                        simd,
+                        Some(&mut over),
+                    );
+                    // The group's records filled their slots (and its
+                    // range of `opp_tri`): pass 1 counted them.
+                    assert_eq!(records, group_records(g), "topology: records miscounted");
+                    (edges, over)
                 },
             )
             .collect()
@@ -621,11 +630,11 @@ fn build_edges_in<const TRI: bool>(
     // Pass 4: each group's records moved down from its listings to follow
     // the previous groups' (records never outnumber twice the listings
     // before them, so a move only overwrites listings already moved or
-    // read), and each further group's edges copied from its own arrays to
-    // follow the previous groups'. The four arrays are independent, so
-    // their moves run side by side: with one group per thread there is
-    // one move per array and thread after the first (45 MB on a
-    // 5M-triangle scene with two threads).
+    // read), and each further group's edges moved across the gaps before
+    // them (and a group's overflow after its own). The four arrays are
+    // independent, so their moves run side by side: with one group per
+    // thread there is one move per array and thread after the first (45
+    // MB on a 5M-triangle scene with two threads).
     let move_records = || {
         for g in 0..groups {
             let (from, to) = (records_at(g), rec_start[group_start[g]]);
@@ -644,24 +653,37 @@ fn build_edges_in<const TRI: bool>(
             }
         }
     };
-    // SAFETY: each further group wrote the first `ne` slots (its edges)
-    // of each of its arrays.
-    for (arrays, &ne) in spill.iter_mut().zip(&group_edges[1..]) {
-        for v in arrays {
-            unsafe { v.set_len(ne) };
-        }
+    // Each group's final place: after the previous groups' edges.
+    let mut edge_start = vec![0usize; groups + 1];
+    for (g, (written, over)) in group_edges.iter().enumerate() {
+        edge_start[g + 1] = edge_start[g] + written + over.a.len();
     }
-    // Appends the further groups' edges in array `which` (0 for `a`, 1 for
-    // `b`, 2 for `opp_start`) to the first group's in `v`; `shift` is 1
-    // for `opp_start`, whose first entry is not a group's.
+    let at = edge_start[groups];
+    // Moves each group's edges in array `which` (0 for `a`, 1 for `b`, 2
+    // for `opp_start`) from its slots to its final place in `v`; `shift`
+    // is 1 for `opp_start`, whose first entry is not a group's. Groups
+    // that move down go first, from the first, each to where the previous
+    // ones end, which is no further than its slots: nothing unmoved is
+    // overwritten. Then groups that move up (after an overflow), from the
+    // last, each to where the next ones start. Then the overflows, past
+    // their groups' edges.
     let move_edges = |v: &mut [MaybeUninit<u32>], shift: usize, which: usize| {
-        let mut at = shift + group_edges[0];
-        for arrays in &spill {
-            let from = &arrays[which];
-            for (to, &x) in v[at..at + from.len()].iter_mut().zip(from) {
+        let moved = |g: usize, v: &mut [MaybeUninit<u32>]| {
+            let from = shift + slot_start[g];
+            v.copy_within(from..from + group_edges[g].0, shift + edge_start[g]);
+        };
+        for g in (0..groups).filter(|&g| edge_start[g] < slot_start[g]) {
+            moved(g, v);
+        }
+        for g in (0..groups).rev().filter(|&g| edge_start[g] > slot_start[g]) {
+            moved(g, v);
+        }
+        for (g, (written, over)) in group_edges.iter().enumerate() {
+            let over = over.array(which);
+            let to = shift + edge_start[g] + written;
+            for (to, &x) in v[to..to + over.len()].iter_mut().zip(over) {
                 *to = MaybeUninit::new(x);
             }
-            at += from.len();
         }
     };
     {
@@ -675,13 +697,12 @@ fn build_edges_in<const TRI: bool>(
             || rayon::join(|| move_edges(vb, 0, 1), || move_edges(vs, 1, 2)),
         );
     }
-    drop(spill);
+    drop(group_edges);
     let list = std::mem::ManuallyDrop::new(list);
     // SAFETY: `list`'s first `n` u32 are the records, all written
     // (asserted per group) and moved into place.
     e.opp = unsafe { Vec::from_raw_parts(list_at as *mut u32, n, list.capacity()) };
     e.opp.shrink_to_fit();
-    let at: usize = group_edges.iter().sum();
     // SAFETY: the records filled `opp_tri` (asserted per group);
     // `opp_start[0]` and the first `at` edges were written (pass 4 moved
     // each group's edges, all written, to follow the previous ones).
@@ -898,6 +919,9 @@ const CHUNK_PARTS: usize = 2;
 struct Buckets<'a> {
     /// `start[r]..start[r + 1]` are range r's listings.
     start: &'a [u32],
+    /// `records[r]..records[r + 1]` are range r's records (pass 1's
+    /// counts).
+    records: &'a [usize],
     /// The listings' address (pass 3 writes records over them once read).
     at: usize,
     /// The address of their triangle ids (with TRI).
@@ -912,6 +936,49 @@ impl Buckets<'_> {
     /// [`Buckets::narrow`] for `vertex_count` vertices.
     fn narrow_for(vertex_count: usize) -> bool {
         vertex_count < KEY_IDS
+    }
+}
+
+/// Slots of an edge array a job writes.
+type Slots<'a> = &'a mut [MaybeUninit<u32>];
+
+/// A group's edges past its slots in the edge arrays, in order ([`emit_ranges`]):
+/// pass 4 puts them after the group's others.
+#[derive(Default)]
+struct Overflow {
+    a: Vec<u32>,
+    b: Vec<u32>,
+    end: Vec<u32>,
+}
+
+impl Overflow {
+    /// Room for `m` more edges in each array, past the ones written.
+    fn room(&mut self, m: usize) -> (Slots<'_>, Slots<'_>, Slots<'_>) {
+        for v in [&mut self.a, &mut self.b, &mut self.end] {
+            v.reserve(m);
+        }
+        (
+            &mut self.a.spare_capacity_mut()[..m],
+            &mut self.b.spare_capacity_mut()[..m],
+            &mut self.end.spare_capacity_mut()[..m],
+        )
+    }
+
+    /// Marks `n` more edges written.
+    ///
+    /// # Safety
+    /// The first `n` slots of the last [`Overflow::room`] must be written
+    /// in every array.
+    unsafe fn wrote(&mut self, n: usize) {
+        for v in [&mut self.a, &mut self.b, &mut self.end] {
+            // SAFETY: the caller's contract.
+            unsafe { v.set_len(v.len() + n) };
+        }
+    }
+
+    /// Array `which`: 0 for `a`, 1 for `b`, 2 for the ends.
+    fn array(&self, which: usize) -> &[u32] {
+        [&self.a, &self.b, &self.end][which]
     }
 }
 
@@ -1304,7 +1371,8 @@ fn emit_fed(
                     edges: 0,
                 }
             };
-            let (r, ne) = emit_ranges::<false>(out, buckets, v..next, &mut scratch, simd);
+            // (The edge slots hold all the records left: no overflow.)
+            let (r, ne) = emit_ranges::<false>(out, buckets, v..next, &mut scratch, simd, None);
             (records, edges) = (records + r, edges + ne);
             feed_ref.done.store(edges, Release);
             v = next;
@@ -1324,8 +1392,9 @@ struct GroupOut<'a> {
     opp: *mut u32,
     /// Its range of `opp_tri` (empty without it).
     tri: &'a mut [MaybeUninit<u32>],
-    /// Its ranges of `a`, `b` and `opp_start` (past the first entry),
-    /// sized for its records: it has no more edges than records.
+    /// Its slots in `a`, `b` and `opp_start` (past the first entry); a
+    /// range is emitted here only with room for as many edges as it has
+    /// records ([`emit_ranges`]).
     a: &'a mut [MaybeUninit<u32>],
     b: &'a mut [MaybeUninit<u32>],
     end: &'a mut [MaybeUninit<u32>],
@@ -1391,14 +1460,18 @@ impl Listings<'_> {
 /// Pass 3 for `vertices` (whole ranges; the last may end at the vertex
 /// count): each range's listings put by vertex ([`sort_range`]), then
 /// its edges emitted from there; its records go to `out` after the ones
-/// before, over listings already read. Returns the numbers of records and
-/// edges written.
+/// before, over listings already read. Its edges go to `out`'s edge
+/// slots while they have room for as many edges as the range has records,
+/// then (this range and all later ones) to `overflow`, which must then be
+/// given. Returns the numbers of records written and of edges written to
+/// `out`.
 fn emit_ranges<const TRI: bool>(
     out: GroupOut,
     buckets: &Buckets,
     vertices: std::ops::Range<usize>,
     scratch: &mut Scratch,
     simd: Simd,
+    mut overflow: Option<&mut Overflow>,
 ) -> (usize, usize) {
     let GroupOut {
         opp,
@@ -1410,6 +1483,7 @@ fn emit_ranges<const TRI: bool>(
         ..
     } = out;
     let (mut records, mut edges) = (0usize, 0usize);
+    let mut spilling = false;
     let listing_bytes = std::mem::size_of::<u32>() * if buckets.bits.is_some() { 2 } else { 3 };
     let mut v = vertices.start;
     while v < vertices.end {
@@ -1430,12 +1504,21 @@ fn emit_ranges<const TRI: bool>(
         // range's (a listing gives at most 2 records, and takes 2 or 3 u32).
         let read = buckets.at + listing_bytes * buckets.start[r + 1] as usize;
         let o_opp = opp.wrapping_add(records);
+        // A range has no more edges than records, and the emit asks for
+        // room for all of them.
+        let m = buckets.records[r + 1] - buckets.records[r];
+        spilling |= a.len() - edges < m;
+        let (oa, ob, oe) = match (spilling, overflow.as_deref_mut()) {
+            (false, _) => (&mut a[edges..], &mut b[edges..], &mut end[edges..]),
+            (true, Some(over)) => over.room(m),
+            (true, None) => panic!("topology: no room for a range's edges"),
+        };
         let o = GroupOut {
             opp: o_opp,
             tri: if TRI { &mut tri[records..] } else { &mut [] },
-            a: &mut a[edges..],
-            b: &mut b[edges..],
-            end: &mut end[edges..],
+            a: oa,
+            b: ob,
+            end: oe,
             base: base + records as u32,
             room: (read - o_opp as usize) / std::mem::size_of::<u32>(),
             records: 0,
@@ -1451,7 +1534,11 @@ fn emit_ranges<const TRI: bool>(
         };
         let (rn, en) = emit_group::<TRI>(o, &listings, v..next, &mut scratch.buf, simd);
         records += rn;
-        edges += en;
+        match overflow.as_deref_mut().filter(|_| spilling) {
+            // SAFETY: the emit wrote the first `en` slots of `room`'s.
+            Some(over) => unsafe { over.wrote(en) },
+            None => edges += en,
+        }
         v = next;
     }
     (records, edges)
@@ -3254,6 +3341,85 @@ mod tests {
                 }
                 assert_eq!(events.into_inner().unwrap(), want_events, "{what}");
                 assert_eq!(std::sync::Arc::strong_count(&mine), 1, "{what}");
+            }
+        }
+    }
+
+    /// Pass 3 gives each group but the last edge slots for half its
+    /// records and a sixteenth more; a group with more edges (open ones)
+    /// writes the rest aside, and pass 4 moves each group's edges down or
+    /// up to follow the previous groups', then the ones aside. Two soups:
+    /// a closed torus (half as many edges as records) whose vertex ids are
+    /// 64 apart, so that a range holds few records and a group of it never
+    /// runs out of slots, and a third as many random triangles (nearly
+    /// every edge open) over the same span of ids, either first, with 1 to
+    /// 4 threads: groups that run out of slots, and groups that move down
+    /// (several in a row) and up. Caught: the down moves made from the last
+    /// group (one overwrote the edges of the group before it, not yet
+    /// moved), the up moves from the first, overflows put before their
+    /// group's other edges or left out of the next groups' places, and a
+    /// group going back to its slots after an overflow.
+    #[test]
+    fn groups_edges_meet_whatever_their_slots_hold() {
+        const STRIDE: u32 = 64;
+        let (w, h) = (64u32, 256u32);
+        let span = w * h * STRIDE;
+        let mut torus = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let at = |dx: u32, dy: u32| ((y + dy) % h * w + (x + dx) % w) * STRIDE;
+                torus.extend_from_slice(&[at(0, 0), at(1, 0), at(1, 1)]);
+                torus.extend_from_slice(&[at(0, 0), at(1, 1), at(0, 1)]);
+            }
+        }
+        let mut bits = crate::multiplicity::test_bits(0x2545_f491_4f6c_dd1d);
+        let mut random = Vec::new();
+        while 3 * random.len() < torus.len() {
+            let t: [u32; 3] = std::array::from_fn(|_| (bits() >> 11) as u32 % span);
+            if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
+                random.extend_from_slice(&t);
+            }
+        }
+        let shifted = |t: &[u32]| t.iter().map(|&v| v + span).collect::<Vec<_>>();
+        let soups = [
+            ("torus first", [torus.clone(), shifted(&random)].concat()),
+            ("random first", [random.clone(), shifted(&torus)].concat()),
+        ];
+        let vertices = 2 * span as usize;
+        for (name, tris) in &soups {
+            let expected = naive(tris);
+            let open = (0..expected.len()).filter(|&e| expected.fan(e) == 1);
+            assert!(
+                open.count() > expected.len() / 5,
+                "{name}: too few open edges"
+            );
+            let without_tri = Edges {
+                opp_tri: Vec::new(),
+                ..expected.clone()
+            };
+            for threads in 1..=4 {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let what = format!("{name}, {threads} threads");
+                let got = pool.install(|| build_edges(tris, vertices));
+                same_edges(&got, &expected, &what);
+                for simd in simd_levels() {
+                    let got = pool.install(|| {
+                        build_edges_in::<false>(
+                            tris[..].into(),
+                            vertices,
+                            threads,
+                            simd,
+                            false,
+                            None,
+                            None,
+                        )
+                        .0
+                    });
+                    same_edges(&got, &without_tri, &format!("{what}, {simd:?}"));
+                }
             }
         }
     }
