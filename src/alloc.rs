@@ -63,8 +63,8 @@
 //! peak memory).
 //!
 //! **A parser's small blocks can come from an arena of our own**
-//! ([`arena`]): the OBJ loader runs tobj inside [`arena::Arena::scope`],
-//! and once the models are freed the pages they used become a kept block,
+//! ([`arena`]): the OBJ loader runs tobj inside [`arena::Arena::scope`]
+//! (both readers of a text parsed in two parts), and once the models are freed the pages they used become a kept block,
 //! which the weld takes instead of faulting in fresh memory (the 5M scene's
 //! weld, one thread, 242 → 75 ms at the median of eight standalone builds;
 //! the figures are in [`arena`]).
@@ -1762,5 +1762,71 @@ Node 0, zone   Normal   1934   1541   1487   1378    992    686    470    318   
         drop(again);
         drop(keep);
         assert_eq!(cached(), (0, 0));
+    }
+
+    /// Scopes of one arena on two threads (the OBJ loader's two readers)
+    /// make it two owners: each gets blocks in chunks of its own and
+    /// reuses the blocks it frees itself, not one the other owner frees;
+    /// a third thread's scope allocates as usual; and once every block is
+    /// freed and the arena dropped, both owners' chunks are one kept block.
+    /// Caught: one owner only (the second thread's blocks were malloc's),
+    /// a block freed onto the freeing thread's lists whoever's chunk it is
+    /// in (reused by the wrong owner), and a chunk's count read from the
+    /// first owner's lists (the second owner's chunk never handed over).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn an_arenas_two_owners_each_reuse_their_own_blocks() {
+        let (_serial, keep) = serial_and_kept();
+        let a = HugePageAlloc;
+        assert_eq!(cached(), (0, 0));
+        let ar = arena::open(64 << 20);
+        let chunk = |p: usize| p / arena::CHUNK;
+        let (p0, r, q1) = ar.scope(|| unsafe {
+            let p0 = a.alloc(lay(100)) as usize;
+            assert!(arena::owns(p0 as *mut u8));
+            let (q1, x1) = std::thread::scope(|s| {
+                s.spawn(|| {
+                    ar.scope(|| {
+                        let p1 = a.alloc(lay(100));
+                        assert!(arena::owns(p1), "the second owner's block");
+                        assert_ne!(chunk(p1 as usize), chunk(p0), "a chunk of its own");
+                        a.dealloc(p1, lay(100));
+                        let q1 = a.alloc(lay(100));
+                        assert_eq!(q1, p1, "its own free reused");
+                        // A third thread's scope, while this one lives
+                        // (a thread's id is the address of a thread
+                        // local, which a later thread may get again): no
+                        // place left.
+                        std::thread::scope(|s| {
+                            s.spawn(|| {
+                                ar.scope(|| {
+                                    let p = a.alloc(lay(100));
+                                    assert!(!arena::owns(p), "a third thread's block");
+                                    a.dealloc(p, lay(100));
+                                })
+                            });
+                        });
+                        (q1 as usize, a.alloc(lay(100)) as usize)
+                    })
+                })
+                .join()
+                .unwrap()
+            });
+            // The second owner's block freed here is not reused here.
+            a.dealloc(x1 as *mut u8, lay(100));
+            let r = a.alloc(lay(100)) as usize;
+            assert!(
+                r != x1 && chunk(r) == chunk(p0),
+                "the first owner's own block"
+            );
+            (p0, r, q1)
+        });
+        for p in [p0, r, q1] {
+            unsafe { a.dealloc(p as *mut u8, lay(100)) };
+        }
+        drop(ar);
+        assert_eq!(cached(), (1, 2 * arena::CHUNK));
+        empty_cache();
+        drop(keep);
     }
 }

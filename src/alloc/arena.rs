@@ -24,11 +24,22 @@
 //! How: while [`Arena::scope`] runs on a thread, that thread's small
 //! allocations (at most [`MAX_BLOCK`] bytes, alignment at most 16) come
 //! from a reserved range: each size rounded up to a power of two, freed
-//! blocks on a list per size (popped first), fresh ones from a bump pointer.
-//! The sizes tobj asks for repeat (a line's `String`, an object's buffers),
-//! so the lists serve most of its churn and the range stays near what is
-//! live at once. Only the thread that ran the scope (the owner) touches the
-//! lists; a block freed on another thread is counted and not reused. When
+//! blocks on a list per size (popped first), fresh ones from a bump pointer
+//! in a chunk of the range the thread took (the next one, when its chunk
+//! is full). The sizes tobj asks for repeat (a line's `String`, an object's
+//! buffers), so the lists serve most of its churn and the range stays near
+//! what is live at once. Up to [`OWNERS`] threads run scopes of one arena
+//! (the OBJ loader's two readers of a split text), each with lists of its
+//! own (the owners); a block is reused only when its chunk's owner frees
+//! it, and one freed on another thread is counted and not reused. Why two:
+//! with one owner, the second reader's blocks were malloc's, unmapped at
+//! the end of the load, and a two-thread build of the 5M scene then
+//! faulted in 34 MiB of fresh huge pages in its weld that a one-thread
+//! build took from the kept blocks (an allocation log); with two owners,
+//! its fresh huge pages 138 → 92 MiB, as with one thread (94), those after
+//! the load 50 → 4 MiB (`python3 benches/fresh_pages.py --by-stage BIN
+//! build target/targets/scene_5000000.obj -o OUT --threads 2`, two runs
+//! each, benches/ROUNDS.md, Sixty-sixth round). When
 //! the [`Arena`] is dropped, the touched part of the range goes to the
 //! allocator's `keep_or_unmap` (kept while a [`super::KeepFreed`] guard
 //! lives) by runs of [`CHUNK`]s none of whose blocks is still live, and
@@ -44,7 +55,7 @@
 //! stored wherever the blocks live.
 
 use std::cell::{Cell, UnsafeCell};
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering::*};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, AtomicUsize, Ordering::*};
 
 /// Largest block the arena serves; larger ones go to malloc or, from
 /// [`super::HUGE_MIN`] on, to mappings of their own.
@@ -63,30 +74,52 @@ const MIN_SHIFT: u32 = 4;
 /// Size classes: 16 bytes to [`MAX_BLOCK`], powers of two.
 const CLASSES: usize = (MAX_BLOCK.trailing_zeros() - MIN_SHIFT + 1) as usize;
 
-/// The owner's state: one free list per class (each free block's first
-/// word is the next one's address, 0 ends a list), the bump pointer, and
-/// per chunk the blocks handed out less those the owner freed.
+/// Most threads that run scopes of one arena (see the module
+/// documentation).
+pub const OWNERS: usize = 2;
+
+/// An owner's state: one free list per class (each free block's first
+/// word is the next one's address, 0 ends a list), the bump pointer with
+/// the end of the owner's current chunk (both 0 before its first chunk;
+/// `full` once the range has no chunk left for it), and per chunk it took
+/// the blocks handed out less those it freed.
+///
+/// Aligned so that two owners' lists share no cache line: each owner writes
+/// its own on every allocation and free. Without it (and with the chunks'
+/// counts in one array for both), the 5M scene's two-thread load took
+/// 1351.4 / 1501.1 ms against 1150.2 / 1256.8 with one owner (fastest /
+/// median of 14 alternations, `python3 benches/compare_binaries.py
+/// --threads 2 OLD NEW target/targets/scene_5000000.obj 14`); aligned,
+/// 1157.6 / 1264.8 against 1149.0 / 1251.5.
+#[repr(C, align(128))]
 struct Lists {
     free: [usize; CLASSES],
     bump: usize,
+    end: usize,
+    full: bool,
     held: [u32; MAX_CHUNKS],
 }
 
-/// [`Lists`] behind a cell that only the owner thread touches while the
+/// [`Lists`] behind a cell that only its owner thread touches while the
 /// arena is open (see [`owner_lists`]); read by others once it is closed.
 struct OwnerOnly(UnsafeCell<Lists>);
 
-// SAFETY: while the arena is open only its owner reads or writes the lists
-// (ownership is taken once, by `Arena::scope`'s compare-exchange); once it
-// is closed nobody writes them, and the close's `SeqCst` store orders the
-// owner's writes before every later read.
+// SAFETY: while the arena is open only an owner reads or writes its lists
+// (each owner's place is taken once, by `Arena::scope`'s compare-exchange);
+// once it is closed nobody writes them, and the close's `SeqCst` store
+// orders the owners' writes before every later read; `open` resets them
+// while no arena exists, so no scope runs.
 unsafe impl Sync for OwnerOnly {}
 
-static LISTS: OwnerOnly = OwnerOnly(UnsafeCell::new(Lists {
-    free: [0; CLASSES],
-    bump: 0,
-    held: [0; MAX_CHUNKS],
-}));
+static LISTS: [OwnerOnly; OWNERS] = [const {
+    OwnerOnly(UnsafeCell::new(Lists {
+        free: [0; CLASSES],
+        bump: 0,
+        end: 0,
+        full: false,
+        held: [0; MAX_CHUNKS],
+    }))
+}; OWNERS];
 
 /// The reserved range, `BASE..END` (both 0 without an arena); `BASE` is
 /// chunk-aligned.
@@ -96,20 +129,25 @@ static END: AtomicUsize = AtomicUsize::new(0);
 static LIVE: [AtomicBool; MAX_CHUNKS] = [const { AtomicBool::new(false) }; MAX_CHUNKS];
 /// Per chunk: blocks freed by other threads, or by anyone after the close.
 static FREED_ELSEWHERE: [AtomicU32; MAX_CHUNKS] = [const { AtomicU32::new(0) }; MAX_CHUNKS];
+/// Per chunk: the owner that took it (its place in [`OWNER`]).
+static CHUNK_OWNER: [AtomicU8; MAX_CHUNKS] = [const { AtomicU8::new(0) }; MAX_CHUNKS];
+/// The next chunk no owner has taken.
+static NEXT: AtomicUsize = AtomicUsize::new(0);
 /// Bytes handed to the allocator's `keep_or_unmap` by every arena so far.
 static HANDED_OVER: AtomicUsize = AtomicUsize::new(0);
 /// Chunks still the arena's after the close.
 static HELD_CHUNKS: AtomicUsize = AtomicUsize::new(0);
 /// An arena exists (from [`open`] until its last chunk is handed over).
 static TAKEN: AtomicBool = AtomicBool::new(false);
-/// The owner thread's id ([`thread_id`]), 0 before the first scope.
-static OWNER: AtomicUsize = AtomicUsize::new(0);
+/// The owner threads' ids ([`thread_id`]), 0 for a place no scope took.
+static OWNER: [AtomicUsize; OWNERS] = [const { AtomicUsize::new(0) }; OWNERS];
 /// The [`Arena`] was dropped: no block is handed out any more.
 static CLOSED: AtomicBool = AtomicBool::new(false);
 
 thread_local! {
-    /// This thread allocates from the arena (inside [`Arena::scope`]).
-    static ACTIVE: Cell<bool> = const { Cell::new(false) };
+    /// This thread allocates from the arena (inside [`Arena::scope`]): its
+    /// place in [`OWNER`] plus one, 0 outside a scope.
+    static ACTIVE: Cell<usize> = const { Cell::new(0) };
     /// A byte whose address names this thread.
     static ID: u8 = const { 0 };
 }
@@ -130,15 +168,23 @@ fn class_index(block: usize) -> usize {
     (block.trailing_zeros() - MIN_SHIFT) as usize
 }
 
-/// The owner's lists.
+/// Owner `k`'s lists.
 ///
 /// # Safety
-/// Only the owner thread may call it, while the arena is open, and hold
-/// one reference at a time.
+/// Only owner `k`'s thread may call it, while the arena is open, and hold
+/// one reference at a time (or `open`, while no arena exists).
 #[allow(clippy::mut_from_ref)]
-unsafe fn owner_lists() -> &'static mut Lists {
+unsafe fn owner_lists(k: usize) -> &'static mut Lists {
     // SAFETY: the caller's.
-    unsafe { &mut *LISTS.0.get() }
+    unsafe { &mut *LISTS[k].0.get() }
+}
+
+/// Chunk `c`'s blocks handed out less those its owner freed, once the
+/// arena is closed.
+fn held(c: usize) -> u32 {
+    let k = CHUNK_OWNER[c].load(Relaxed) as usize;
+    // SAFETY: read once the arena is closed, when nobody writes the lists.
+    unsafe { (*LISTS[k].0.get()).held[c] }
 }
 
 /// Whether `p` is in one of the arena's chunks (then a small block at `p`
@@ -162,14 +208,16 @@ pub(super) fn same_block(size: usize, new_size: usize) -> bool {
 /// `zeroed`, its first `size` bytes are zero.
 #[inline]
 pub(super) fn alloc(size: usize, align: usize, zeroed: bool) -> *mut u8 {
-    if !ACTIVE.with(|a| a.get()) || size > MAX_BLOCK || align > 16 {
+    let k = ACTIVE.with(|a| a.get());
+    if k == 0 || size > MAX_BLOCK || align > 16 {
         return std::ptr::null_mut();
     }
+    let k = k - 1;
     let block = class_size(size);
     let base = BASE.load(Relaxed);
-    // SAFETY: a thread is active only inside a scope of its own, as the
-    // owner of the open arena (`Arena::scope`).
-    let lists = unsafe { owner_lists() };
+    // SAFETY: a thread is active only inside a scope of its own, as owner
+    // `k` of the open arena (`Arena::scope`).
+    let lists = unsafe { owner_lists(k) };
     let head = &mut lists.free[class_index(block)];
     let p = if *head != 0 {
         let p = *head;
@@ -182,19 +230,24 @@ pub(super) fn alloc(size: usize, align: usize, zeroed: bool) -> *mut u8 {
         }
         p
     } else {
-        let mut p = lists.bump;
-        if (p - base) % CHUNK + block > CHUNK {
-            // No block crosses a chunk's end (the rest of this one stays
-            // untouched).
-            p = p.next_multiple_of(CHUNK);
+        if lists.bump + block > lists.end {
+            // The owner's next chunk (no block crosses a chunk's end: the
+            // rest of the last one stays untouched).
+            if lists.full {
+                return std::ptr::null_mut();
+            }
+            let c = NEXT.fetch_add(1, Relaxed);
+            if base + (c + 1) * CHUNK > END.load(Relaxed) {
+                lists.full = true;
+                return std::ptr::null_mut();
+            }
+            CHUNK_OWNER[c].store(k as u8, Relaxed);
+            LIVE[c].store(true, Release);
+            lists.bump = base + c * CHUNK;
+            lists.end = lists.bump + CHUNK;
         }
-        if p + block > END.load(Relaxed) {
-            return std::ptr::null_mut();
-        }
-        if (p - base).is_multiple_of(CHUNK) {
-            LIVE[(p - base) / CHUNK].store(true, Release);
-        }
-        lists.bump = p + block;
+        let p = lists.bump;
+        lists.bump += block;
         // Never handed out before: a fresh mapping's zeros.
         p
     };
@@ -208,9 +261,11 @@ pub(super) fn alloc(size: usize, align: usize, zeroed: bool) -> *mut u8 {
 /// `p` must be a live block of the arena ([`owns`]) of that size.
 pub(super) unsafe fn dealloc(p: *mut u8, size: usize) {
     let chunk = (p as usize - BASE.load(Acquire)) / CHUNK;
-    if !CLOSED.load(SeqCst) && OWNER.load(Relaxed) == thread_id() {
-        // SAFETY: the open arena's owner (see `alloc`).
-        let lists = unsafe { owner_lists() };
+    // (The block was handed to this thread after its chunk was taken.)
+    let k = CHUNK_OWNER[chunk].load(Relaxed) as usize;
+    if !CLOSED.load(SeqCst) && OWNER[k].load(Relaxed) == thread_id() {
+        // SAFETY: the open arena's owner `k` (see `alloc`).
+        let lists = unsafe { owner_lists(k) };
         let head = &mut lists.free[class_index(class_size(size))];
         // SAFETY: the block is at least a word and ours.
         unsafe { (p as *mut usize).write(*head) };
@@ -220,8 +275,7 @@ pub(super) unsafe fn dealloc(p: *mut u8, size: usize) {
     }
     // Another thread's free, or one after the close: counted, not reused.
     let freed = FREED_ELSEWHERE[chunk].fetch_add(1, SeqCst) + 1;
-    // SAFETY: read once the arena is closed, when nobody writes the lists.
-    if CLOSED.load(SeqCst) && freed == unsafe { (*LISTS.0.get()).held[chunk] } {
+    if CLOSED.load(SeqCst) && freed == held(chunk) {
         release(chunk..chunk + 1);
     }
 }
@@ -232,9 +286,7 @@ pub(super) unsafe fn dealloc(p: *mut u8, size: usize) {
 /// Only after the close, when the per-chunk counts are final.
 fn release(chunks: std::ops::Range<usize>) {
     let base = BASE.load(Acquire);
-    // SAFETY: the arena is closed, so nobody writes the lists.
-    let held = unsafe { &(*LISTS.0.get()).held };
-    let free = |c: usize| held[c] == FREED_ELSEWHERE[c].load(SeqCst);
+    let free = |c: usize| held(c) == FREED_ELSEWHERE[c].load(SeqCst);
     let mut taken = 0;
     let mut run = chunks.start..chunks.start;
     for c in chunks.clone().chain([chunks.end]) {
@@ -326,16 +378,19 @@ pub fn open(capacity: usize) -> Arena {
     #[cfg(not(target_os = "linux"))]
     let p = std::ptr::null_mut::<u8>();
     let base = (p as usize).next_multiple_of(CHUNK);
-    // SAFETY: the arena was not taken, so no scope runs and nobody else
-    // touches the lists; every chunk of the last arena was handed over.
-    let lists = unsafe { owner_lists() };
-    lists.free = [0; CLASSES];
-    lists.bump = base;
-    lists.held.fill(0);
+    for (k, owner) in OWNER.iter().enumerate() {
+        // SAFETY: the arena was not taken, so no scope runs and nobody
+        // else touches the lists; every chunk of the last arena was
+        // handed over.
+        let lists = unsafe { owner_lists(k) };
+        (lists.free, lists.bump, lists.end, lists.full) = ([0; CLASSES], 0, 0, false);
+        lists.held.fill(0);
+        owner.store(0, Relaxed);
+    }
     for f in &FREED_ELSEWHERE {
         f.store(0, Relaxed);
     }
-    OWNER.store(0, Relaxed);
+    NEXT.store(0, Relaxed);
     CLOSED.store(false, SeqCst);
     END.store(p as usize + len, Release);
     BASE.store(base, Release);
@@ -347,27 +402,34 @@ pub fn open(capacity: usize) -> Arena {
 
 impl Arena {
     /// Runs `work` with this thread's small allocations in the arena (see
-    /// the module documentation). The first thread to run a scope owns the
-    /// arena; on any other thread, or without an arena, `work` allocates
-    /// as usual.
+    /// the module documentation). The first [`OWNERS`] threads to run a
+    /// scope own the arena, each its own place; on any other thread, or
+    /// without an arena, `work` allocates as usual.
     pub fn scope<T>(&self, work: impl FnOnce() -> T) -> T {
-        let me = thread_id();
-        let owner = self.reserved
-            && match OWNER.compare_exchange(0, me, AcqRel, Acquire) {
-                Ok(_) => true,
-                Err(o) => o == me,
-            };
-        if !owner || ACTIVE.with(|a| a.get()) {
+        if !self.reserved || ACTIVE.with(|a| a.get()) != 0 {
             return work();
         }
+        // This thread's place: one it took before, else the first free
+        // one (places are taken in order and kept until the next arena).
+        let me = thread_id();
+        let place =
+            (0..OWNERS).find(
+                |&k| match OWNER[k].compare_exchange(0, me, AcqRel, Acquire) {
+                    Ok(_) => true,
+                    Err(o) => o == me,
+                },
+            );
+        let Some(k) = place else {
+            return work();
+        };
         /// Ends the scope, also when `work` panics.
         struct Active;
         impl Drop for Active {
             fn drop(&mut self) {
-                ACTIVE.with(|a| a.set(false));
+                ACTIVE.with(|a| a.set(0));
             }
         }
-        ACTIVE.with(|a| a.set(true));
+        ACTIVE.with(|a| a.set(k + 1));
         let _active = Active;
         work()
     }
@@ -379,12 +441,11 @@ impl Drop for Arena {
             return;
         }
         let base = BASE.load(Acquire);
-        // The scopes borrowed this value, so they have ended; the owner's
+        // The scopes borrowed this value, so they have ended; the owners'
         // writes happened before this drop (on its thread, or before the
-        // join of its thread).
-        // SAFETY: no scope runs.
-        let bump = unsafe { owner_lists() }.bump;
-        let used = (bump - base).div_ceil(CHUNK);
+        // join of theirs). The chunks taken are the first `used`.
+        let chunks = (END.load(Acquire) - base) / CHUNK;
+        let used = NEXT.load(Acquire).min(chunks);
         let live = (0..used).filter(|&c| LIVE[c].load(Acquire)).count();
         HELD_CHUNKS.store(live, SeqCst);
         CLOSED.store(true, SeqCst);

@@ -36,7 +36,8 @@
 //!    more, a text of at least `SPLIT_MIN` bytes is parsed in two parts at
 //!    once (`parse_split`): a second reader gives tobj the first part's `v`
 //!    statements and then the rest, and the models are those of the whole
-//!    text cut into one more block. A few recoverable problems are repaired in place and the
+//!    text cut into one more block; both readers' blocks come from the
+//!    arena (its two owners). A few recoverable problems are repaired in place and the
 //!    parse is retried (see `repair_vertex_lines`); any other failure is turned
 //!    into a message naming the offending line (`diagnose`).
 //! 4. **Triangulate** (`Triangulator`): triangles pass through; every face
@@ -62,6 +63,7 @@
 //!   triangle, which is also the number of [`Part`]s.
 
 use super::{Part, Soup};
+use crate::alloc::arena::Arena;
 use crate::error::{Error, Result};
 use crate::file_bytes::FileBytes;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -94,7 +96,7 @@ pub fn load_obj(path: &Path, data: impl Into<FileBytes>) -> Result<Soup> {
     warm_up_tobj();
     let arena = crate::alloc::arena::open(ARENA_PER_BYTE * data.len() + ARENA_EXTRA);
     let ((input_bytes, input_sha256), streamed) = super::digest_while(&[&data], || {
-        guarded(|| arena.scope(|| parse_streaming(&data)))
+        guarded(|| arena.scope(|| parse_streaming(&data, &arena)))
     });
     let parsed = match streamed {
         Ok(Some(parsed)) => {
@@ -171,7 +173,7 @@ struct Parsed {
 /// invalid UTF-8, CR-only line ends, repairs, or an error to diagnose):
 /// then [`parse_owned`] does all of it on the whole text, from the start, so
 /// the result is exactly the same whichever path is taken.
-fn parse_streaming(data: &[u8]) -> Result<Option<Parsed>, String> {
+fn parse_streaming(data: &[u8], arena: &Arena) -> Result<Option<Parsed>, String> {
     if data.starts_with(&[0xFE, 0xFF]) || data.starts_with(&[0xFF, 0xFE]) {
         return Ok(None);
     }
@@ -185,7 +187,7 @@ fn parse_streaming(data: &[u8]) -> Result<Option<Parsed>, String> {
         && rayon::current_num_threads() >= 2
         && let Some(split) = split_point(text)
     {
-        match parse_split(text, split) {
+        match parse_split(text, split, arena) {
             Split::Parsed(parsed) => return Ok(Some(parsed)),
             Split::Declined => return Ok(None),
             // Parsed again by one reader below, as with one thread: a
@@ -251,16 +253,17 @@ const SPLIT_MIN: usize = 2 << 20;
 /// change) or the statement in force at the cut was continued (it cannot
 /// be repeated): the caller then parses again with one reader, as a
 /// one-thread build does.
-fn parse_split(text: &[u8], split: usize) -> Split {
+fn parse_split(text: &[u8], split: usize, arena: &Arena) -> Split {
     let claim = std::sync::atomic::AtomicBool::new(false);
     let mut second = None;
     // The first part on this thread, which may be inside the loader's
     // arena scope (`rayon::join` called from outside the pool would run
-    // both parts on its workers); the second on the pool.
+    // both parts on its workers); the second on the pool, in a scope of
+    // the same arena (its second owner: `alloc::arena`).
     let first = rayon::in_place_scope(|scope| {
         let slot = &mut second;
         let claim = &claim;
-        scope.spawn(move |_| *slot = second_part(text, split, claim));
+        scope.spawn(move |_| *slot = arena.scope(|| second_part(text, split, claim)));
         first_part(text, split, claim)
     });
     join_parts(first, second)
@@ -2385,7 +2388,9 @@ mod tests {
         }
         for text in &texts {
             let data = text.as_bytes();
-            let streamed = parse_streaming(data).unwrap().expect("fast path");
+            let streamed = parse_streaming(data, &crate::alloc::arena::open(0))
+                .unwrap()
+                .expect("fast path");
             let owned = parse_owned(data.to_vec()).unwrap();
             assert_eq!(debug_models(&streamed.models), debug_models(&owned.models));
             assert_eq!(streamed.scan.joins, owned.scan.joins);
@@ -2419,7 +2424,7 @@ mod tests {
             b"v 1 2 3\x00\n",
             &invalid,
         ] {
-            let streamed = parse_streaming(data).unwrap();
+            let streamed = parse_streaming(data, &crate::alloc::arena::open(0)).unwrap();
             // A UTF-8 byte-order mark is simply skipped.
             assert_eq!(streamed.is_some(), data.starts_with(b"\xEF"), "{data:?}");
         }
@@ -2601,7 +2606,12 @@ mod tests {
         for text in split_texts() {
             let data = text.as_bytes();
             // The streaming path takes every one of these texts whole.
-            assert!(parse_streaming(data).unwrap().is_some(), "{text:?}");
+            assert!(
+                parse_streaming(data, &crate::alloc::arena::open(0))
+                    .unwrap()
+                    .is_some(),
+                "{text:?}"
+            );
             let whole = by_value(parse_owned(data.to_vec()).unwrap());
             let mut cuts = 0;
             for split in 1..data.len() {
@@ -2681,7 +2691,9 @@ mod tests {
         let mut one = PrescanReader::new(nan);
         let one = run_tobj(&mut one).unwrap();
         assert!(nan.len() >= SPLIT_MIN);
-        let streamed = parse_streaming(nan).unwrap().expect("streamed");
+        let streamed = parse_streaming(nan, &crate::alloc::arena::open(0))
+            .unwrap()
+            .expect("streamed");
         assert_eq!(debug_models(&streamed.models), debug_models(&one));
     }
 
