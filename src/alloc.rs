@@ -64,10 +64,11 @@
 //!
 //! **A parser's small blocks can come from an arena of our own**
 //! ([`arena`]): the OBJ loader runs tobj inside [`arena::Arena::scope`]
-//! (both readers of a text parsed in two parts), and once the models are freed the pages they used become a kept block,
-//! which the weld takes instead of faulting in fresh memory (the 5M scene's
-//! weld, one thread, 242 → 75 ms at the median of eight standalone builds;
-//! the figures are in [`arena`]).
+//! (both readers of a text parsed in two parts), and once the models are
+//! freed the pages they used become a kept block, which the weld takes
+//! instead of faulting in fresh memory (the 5M scene's weld, one thread,
+//! 242 → 75 ms at the median of eight standalone builds; the figures are
+//! in [`arena`]).
 //!
 //! The `svpack` binary and the benchmarks install it with
 //! `#[global_allocator]`; library users choose their own allocator.

@@ -37,9 +37,10 @@
 //!    once (`parse_split`): a second reader gives tobj the first part's `v`
 //!    statements and then the rest, and the models are those of the whole
 //!    text cut into one more block; both readers' blocks come from the
-//!    arena (its two owners). A few recoverable problems are repaired in place and the
-//!    parse is retried (see `repair_vertex_lines`); any other failure is turned
-//!    into a message naming the offending line (`diagnose`).
+//!    arena (its two owners). A few recoverable problems are repaired in
+//!    place and the parse is retried (see `repair_vertex_lines`); any other
+//!    failure is turned into a message naming the offending line
+//!    (`diagnose`).
 //! 4. **Triangulate** (`Triangulator`): triangles pass through; every face
 //!    with `n >= 4` corners gives exactly `n - 2` triangles that use all its
 //!    corners (so edges still match the neighbouring faces) in the face's
